@@ -1,0 +1,3 @@
+//! The material: a plan built once from parameters, evaluated many times.
+
+pub struct Brdf;

@@ -1,0 +1,21 @@
+//! Stam's "Diffraction Shaders" (SIGGRAPH 1999) as a BRDF library.
+//!
+//! All the physics of the project lives here: the four microsurface models
+//! (isotropic and anisotropic Gaussian, fractal, periodic), the coherent
+//! specular lobe, Fresnel, colour by wavelength integration and the C ABI
+//! that the Mitsuba plugin calls. See `docs/physics.md` for the formulas.
+
+pub mod brdf;
+pub mod error;
+pub mod ffi;
+pub mod fractal;
+pub mod fresnel;
+pub mod gaussian;
+pub mod geometry;
+pub mod params;
+pub mod periodic;
+pub mod special;
+pub mod spectrum;
+
+pub use brdf::Brdf;
+pub use error::StamError;

@@ -1,0 +1,2 @@
+//! Periodic surfaces: gratings and the compact disc. See docs/physics.md,
+//! "Periodic surfaces".
