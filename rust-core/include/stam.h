@@ -1,0 +1,80 @@
+/* stam.h: C ABI of the Stam diffraction BRDF core (Rust library `stam`).
+ *
+ * Directions wi, wo: 3 floats per direction (x, y, z) in the local shading
+ * frame (z = normal, x = tangent = the periodic direction of gratings, y =
+ * bitangent), unit length, pointing away from the surface. Wavelengths in
+ * nanometres. Lengths in the parameter JSON are micrometres.
+ *
+ * Every function is safe to call with any float values (NaN, below the
+ * horizon, lambda = 0): outputs are finite and non-negative (0 where the BRDF
+ * is undefined). NULL material pointers produce zeros. No function panics
+ * or aborts; construction errors are reported through `err`.
+ */
+#ifndef STAM_H
+#define STAM_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct StamBrdf StamBrdf;
+
+/* Build a material from JSON parameters (see docs/parameters.md). Returns NULL
+ * on error and writes a NUL-terminated message naming the bad key and its
+ * accepted range into err (truncated to err_len bytes; err may be NULL). */
+StamBrdf *stam_brdf_new(const char *params_json, char *err, size_t err_len);
+
+/* Free a material (NULL is ignored). */
+void stam_brdf_free(StamBrdf *brdf);
+
+/* f(wi, wo; lambda) in 1/sr, NOT multiplied by cos, WITHOUT the coherent
+ * delta lobe. n pairs; lambda_nm has one wavelength per pair. */
+void stam_brdf_eval_spectral(const StamBrdf *b, size_t n, const float *wi, const float *wo,
+                             const float *lambda_nm, float *out);
+
+/* The same projected to linear sRGB (3 floats per pair), D65-weighted: a flat
+ * spectrum maps to (1, 1, 1). */
+void stam_brdf_eval_rgb(const StamBrdf *b, size_t n, const float *wi, const float *wo,
+                        float *out_rgb);
+
+/* Reflectance of the coherent (mirror) delta lobe: F^2 exp(-g) for Gaussian
+ * surfaces, 0 otherwise. */
+void stam_brdf_coherent_spectral(const StamBrdf *b, size_t n, const float *wi,
+                                 const float *lambda_nm, float *out);
+void stam_brdf_coherent_rgb(const StamBrdf *b, size_t n, const float *wi, float *out_rgb);
+
+/* Importance sampling. rnd: 3 uniforms in [0,1) per sample. lambda_nm: one
+ * wavelength per sample (spectral mode) or NULL (RGB mode: a mixture serving
+ * all visible wavelengths, with the matching mixture pdf). Writes wo (3 per
+ * sample), pdf (solid-angle density of the whole strategy at wo; 0 when the
+ * sample failed) and coherent[i] = 1 when the coherent delta lobe was chosen
+ * (then wo is the mirror direction and pdf holds that lobe's discrete
+ * probability). */
+void stam_brdf_sample(const StamBrdf *b, size_t n, const float *wi, const float *lambda_nm,
+                      const float *rnd, float *wo, float *pdf, uint8_t *coherent);
+
+/* Solid-angle pdf of stam_brdf_sample at wo (non-coherent part); lambda_nm as
+ * in stam_brdf_sample (NULL = RGB mode). */
+void stam_brdf_pdf(const StamBrdf *b, size_t n, const float *wi, const float *wo,
+                   const float *lambda_nm, float *pdf);
+
+/* Flags describing the material, for renderers. */
+#define STAM_FLAG_HAS_COHERENT 1u   /* a coherent delta lobe can be non-zero */
+#define STAM_FLAG_ANISOTROPIC 2u    /* f depends on the azimuth of the frame */
+#define STAM_FLAG_SPECTRALLY_VARYING 4u
+uint32_t stam_brdf_flags(const StamBrdf *b);
+
+/* Bytes of memory the material holds (tables included). */
+size_t stam_brdf_memory_bytes(const StamBrdf *b);
+
+/* Library version string, e.g. "0.1.0" (static storage). */
+const char *stam_version(void);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* STAM_H */
