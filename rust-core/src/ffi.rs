@@ -1,1 +1,225 @@
-//! ffi
+//! The C ABI (include/stam.h). Thin: converts, checks pointers, catches
+//! panics. No physics here.
+//!
+//! Every entry point is wrapped in `catch_unwind`: a bug must never unwind
+//! into C. On a caught panic, outputs are zeroed (and construction reports
+//! the panic message).
+
+use crate::brdf::Brdf;
+use glam::DVec3;
+use std::ffi::{c_char, CStr};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// Opaque handle handed to C.
+pub struct StamBrdf {
+    pub brdf: Brdf,
+}
+
+/// f64 -> f32 for outputs: finite, non-negative, clamped to f32::MAX.
+#[inline]
+fn to_output(x: f64) -> f32 {
+    if x > 0.0 {
+        x.min(f32::MAX as f64) as f32
+    } else {
+        0.0
+    }
+}
+
+#[inline]
+unsafe fn direction(p: *const f32, i: usize) -> DVec3 {
+    let s = std::slice::from_raw_parts(p.add(3 * i), 3);
+    DVec3::new(s[0] as f64, s[1] as f64, s[2] as f64)
+}
+
+/// Copy `message` into the caller's buffer, truncated at a char boundary and
+/// NUL-terminated.
+unsafe fn write_message(err: *mut c_char, err_len: usize, message: &str) {
+    if err.is_null() || err_len == 0 {
+        return;
+    }
+    let mut len = message.len().min(err_len - 1);
+    while !message.is_char_boundary(len) {
+        len -= 1;
+    }
+    std::ptr::copy_nonoverlapping(message.as_ptr(), err as *mut u8, len);
+    *err.add(len) = 0;
+}
+
+fn panic_message(payload: Box<dyn std::any::Any + Send>) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        format!("internal error: {s}")
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        format!("internal error: {s}")
+    } else {
+        "internal error".to_string()
+    }
+}
+
+/// # Safety
+/// `params_json` must be NULL or a NUL-terminated string; `err` NULL or
+/// writable for `err_len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_new(
+    params_json: *const c_char,
+    err: *mut c_char,
+    err_len: usize,
+) -> *mut StamBrdf {
+    if params_json.is_null() {
+        write_message(err, err_len, "params_json is NULL");
+        return std::ptr::null_mut();
+    }
+    let text = match CStr::from_ptr(params_json).to_str() {
+        Ok(t) => t,
+        Err(_) => {
+            write_message(err, err_len, "params_json is not valid UTF-8");
+            return std::ptr::null_mut();
+        }
+    };
+    match catch_unwind(|| Brdf::from_json(text)) {
+        Ok(Ok(brdf)) => {
+            write_message(err, err_len, "");
+            Box::into_raw(Box::new(StamBrdf { brdf }))
+        }
+        Ok(Err(e)) => {
+            write_message(err, err_len, &e.message);
+            std::ptr::null_mut()
+        }
+        Err(payload) => {
+            write_message(err, err_len, &panic_message(payload));
+            std::ptr::null_mut()
+        }
+    }
+}
+
+/// # Safety
+/// `brdf` must be NULL or a pointer returned by `stam_brdf_new`, freed once.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_free(brdf: *mut StamBrdf) {
+    if !brdf.is_null() {
+        let _ = catch_unwind(AssertUnwindSafe(|| drop(Box::from_raw(brdf))));
+    }
+}
+
+/// Run `body` over n items, zero-filling `out` (n * width floats) when the
+/// material is NULL or a panic is caught.
+unsafe fn batch(
+    b: *const StamBrdf,
+    n: usize,
+    out: *mut f32,
+    width: usize,
+    inputs_ok: bool,
+    body: impl Fn(&Brdf, usize, &mut [f32]),
+) {
+    if out.is_null() || n == 0 {
+        return;
+    }
+    let out = std::slice::from_raw_parts_mut(out, n * width);
+    if b.is_null() || !inputs_ok {
+        out.fill(0.0);
+        return;
+    }
+    let brdf = &(*b).brdf;
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        for (i, chunk) in out.chunks_exact_mut(width).enumerate() {
+            body(brdf, i, chunk);
+        }
+    }));
+    if result.is_err() {
+        out.fill(0.0);
+    }
+}
+
+/// # Safety
+/// Arrays hold n (wi, wo: 3n) floats; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_eval_spectral(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    wo: *const f32,
+    lambda_nm: *const f32,
+    out: *mut f32,
+) {
+    let ok = !wi.is_null() && !wo.is_null() && !lambda_nm.is_null();
+    batch(b, n, out, 1, ok, |brdf, i, o| {
+        let f = brdf.eval_spectral(direction(wi, i), direction(wo, i), *lambda_nm.add(i) as f64);
+        o[0] = to_output(f);
+    });
+}
+
+/// # Safety
+/// wi, wo hold 3n floats, out_rgb 3n; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_eval_rgb(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    wo: *const f32,
+    out_rgb: *mut f32,
+) {
+    let ok = !wi.is_null() && !wo.is_null();
+    batch(b, n, out_rgb, 3, ok, |brdf, i, o| {
+        let rgb = brdf.eval_rgb(direction(wi, i), direction(wo, i));
+        for c in 0..3 {
+            o[c] = to_output(rgb[c]);
+        }
+    });
+}
+
+/// # Safety
+/// wi holds 3n floats, lambda_nm and out n; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_coherent_spectral(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    lambda_nm: *const f32,
+    out: *mut f32,
+) {
+    let ok = !wi.is_null() && !lambda_nm.is_null();
+    batch(b, n, out, 1, ok, |brdf, i, o| {
+        o[0] = to_output(brdf.coherent_spectral(direction(wi, i), *lambda_nm.add(i) as f64));
+    });
+}
+
+/// # Safety
+/// wi and out_rgb hold 3n floats; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_coherent_rgb(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    out_rgb: *mut f32,
+) {
+    batch(b, n, out_rgb, 3, !wi.is_null(), |brdf, i, o| {
+        let rgb = brdf.coherent_rgb(direction(wi, i));
+        for c in 0..3 {
+            o[c] = to_output(rgb[c]);
+        }
+    });
+}
+
+/// # Safety
+/// `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_flags(b: *const StamBrdf) -> u32 {
+    if b.is_null() {
+        return 0;
+    }
+    catch_unwind(AssertUnwindSafe(|| (*b).brdf.flags())).unwrap_or(0)
+}
+
+/// # Safety
+/// `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_memory_bytes(b: *const StamBrdf) -> usize {
+    if b.is_null() {
+        return 0;
+    }
+    catch_unwind(AssertUnwindSafe(|| (*b).brdf.memory_bytes())).unwrap_or(0)
+}
+
+#[no_mangle]
+pub extern "C" fn stam_version() -> *const c_char {
+    concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr() as *const c_char
+}

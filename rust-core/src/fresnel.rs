@@ -1,1 +1,169 @@
-//! fresnel
+//! Fresnel reflectance F^2 of the mean surface, evaluated at the local
+//! incidence angle of the specular microfacet (Kirchhoff): cos = wi . h.
+//!
+//! Three kinds: a constant reflectance, a constant complex index, or a
+//! metal's measured spectral index (tabulated, linear in wavelength).
+
+use crate::spectrum::metals::{MetalTable, METALS};
+
+#[derive(Clone)]
+pub enum Fresnel {
+    /// Reflectance F^2 independent of angle and wavelength, in (0, 1].
+    Constant(f64),
+    /// Conductor (or dielectric for k = 0) with a wavelength-independent
+    /// complex index eta + i k.
+    ComplexIndex { eta: f64, k: f64 },
+    /// A metal with a measured spectral index.
+    Metal(&'static MetalTable),
+}
+
+/// Names accepted for `fresnel`, in the order documented.
+pub fn metal_names() -> Vec<&'static str> {
+    METALS.iter().map(|m| m.name).collect()
+}
+
+pub fn metal_by_name(name: &str) -> Option<&'static MetalTable> {
+    let wanted = match name {
+        "aluminum" | "al" | "Al" => "aluminium",
+        "ag" | "Ag" => "silver",
+        "au" | "Au" => "gold",
+        "cu" | "Cu" => "copper",
+        "cr" | "Cr" => "chromium",
+        other => other,
+    };
+    METALS.iter().find(|m| m.name == wanted)
+}
+
+impl std::fmt::Debug for Fresnel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Fresnel::Constant(r) => write!(f, "Constant({r})"),
+            Fresnel::ComplexIndex { eta, k } => write!(f, "ComplexIndex {{ eta: {eta}, k: {k} }}"),
+            Fresnel::Metal(t) => write!(f, "Metal({})", t.name),
+        }
+    }
+}
+
+impl PartialEq for Fresnel {
+    fn eq(&self, other: &Fresnel) -> bool {
+        match (self, other) {
+            (Fresnel::Constant(a), Fresnel::Constant(b)) => a == b,
+            (Fresnel::ComplexIndex { eta: a, k: b }, Fresnel::ComplexIndex { eta: c, k: d }) => {
+                a == c && b == d
+            }
+            (Fresnel::Metal(a), Fresnel::Metal(b)) => a.name == b.name,
+            _ => false,
+        }
+    }
+}
+
+impl Fresnel {
+    /// Reflectance at local incidence cosine `cos_theta` and wavelength.
+    #[inline]
+    pub fn reflectance(&self, cos_theta: f64, lambda_nm: f64) -> f64 {
+        match self {
+            Fresnel::Constant(r) => *r,
+            Fresnel::ComplexIndex { eta, k } => conductor_reflectance(cos_theta, *eta, *k),
+            Fresnel::Metal(table) => {
+                let (eta, k) = metal_index(table, lambda_nm);
+                conductor_reflectance(cos_theta, eta, k)
+            }
+        }
+    }
+
+    /// True when the reflectance does not depend on wavelength.
+    pub fn is_spectrally_flat(&self) -> bool {
+        !matches!(self, Fresnel::Metal(_))
+    }
+}
+
+/// Linear interpolation of a metal's index, clamped at the table ends.
+pub fn metal_index(table: &MetalTable, lambda_nm: f64) -> (f64, f64) {
+    let xs = table.lambda_nm;
+    let n = xs.len();
+    if !(lambda_nm > xs[0]) {
+        return (table.eta[0], table.k[0]);
+    }
+    if lambda_nm >= xs[n - 1] {
+        return (table.eta[n - 1], table.k[n - 1]);
+    }
+    let i = xs.partition_point(|&x| x <= lambda_nm).clamp(1, n - 1);
+    let t = (lambda_nm - xs[i - 1]) / (xs[i] - xs[i - 1]);
+    (
+        table.eta[i - 1] + t * (table.eta[i] - table.eta[i - 1]),
+        table.k[i - 1] + t * (table.k[i] - table.k[i - 1]),
+    )
+}
+
+/// Unpolarised Fresnel reflectance of a conductor with index eta + i k
+/// (k = 0: a dielectric seen from outside), in real arithmetic.
+#[inline]
+pub fn conductor_reflectance(cos_theta: f64, eta: f64, k: f64) -> f64 {
+    let c = cos_theta.clamp(0.0, 1.0);
+    let c2 = c * c;
+    let s2 = 1.0 - c2;
+    let eta2 = eta * eta;
+    let k2 = k * k;
+    let t0 = eta2 - k2 - s2;
+    let a2_plus_b2 = (t0 * t0 + 4.0 * eta2 * k2).sqrt();
+    let a = (0.5 * (a2_plus_b2 + t0)).max(0.0).sqrt();
+    let t1 = a2_plus_b2 + c2;
+    let t2 = 2.0 * a * c;
+    let rs = (t1 - t2) / (t1 + t2);
+    let t3 = c2 * a2_plus_b2 + s2 * s2;
+    let t4 = t2 * s2;
+    let rp = rs * (t3 - t4) / (t3 + t4);
+    let r = 0.5 * (rs + rp);
+    if r.is_finite() {
+        r.clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use num_complex::Complex64;
+
+    /// Independent form: complex amplitude coefficients.
+    fn complex_reference(cos_i: f64, eta: f64, k: f64) -> f64 {
+        let n = Complex64::new(eta, k);
+        let sin2 = 1.0 - cos_i * cos_i;
+        let cos_t = (Complex64::new(1.0, 0.0) - sin2 / (n * n)).sqrt();
+        let rs = (cos_i - n * cos_t) / (cos_i + n * cos_t);
+        let rp = (n * cos_i - cos_t) / (n * cos_i + cos_t);
+        0.5 * (rs.norm_sqr() + rp.norm_sqr())
+    }
+
+    #[test]
+    fn real_form_matches_complex_amplitudes() {
+        for &(eta, k) in &[(1.5, 0.0), (0.2, 3.9), (1.1, 6.7), (2.5, 0.3)] {
+            for i in 0..=50 {
+                let c = (i as f64 / 50.0).max(1e-6);
+                let a = conductor_reflectance(c, eta, k);
+                let b = complex_reference(c, eta, k);
+                assert!((a - b).abs() < 1e-10, "eta {eta} k {k} cos {c}: {a} vs {b}");
+            }
+        }
+        // Normal incidence closed form ((n-1)^2 + k^2)/((n+1)^2 + k^2).
+        let r = conductor_reflectance(1.0, 1.2, 7.0);
+        assert!((r - (0.04 + 49.0) / (4.84 + 49.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn metals_are_reflective_and_named() {
+        for name in ["aluminium", "silver", "gold", "copper", "chromium"] {
+            let table = metal_by_name(name).expect(name);
+            let f = Fresnel::Metal(table);
+            for lambda in [360.0, 450.0, 550.0, 650.0, 830.0] {
+                let r = f.reflectance(1.0, lambda);
+                assert!(r > 0.3 && r <= 1.0, "{name} {lambda}: {r}");
+            }
+        }
+        // Gold is yellow: much more reflective in the red than the blue.
+        let gold = Fresnel::Metal(metal_by_name("gold").unwrap());
+        assert!(gold.reflectance(1.0, 650.0) > gold.reflectance(1.0, 450.0) + 0.3);
+        assert!(metal_by_name("unobtainium").is_none());
+    }
+}

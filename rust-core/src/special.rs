@@ -30,7 +30,9 @@ pub fn fast_exp(x: f64) -> f64 {
     // the very bottom of the range, handled by splitting the scale.
     let ni = n as i64;
     if ni < -1020 {
-        return p * f64::from_bits(((ni + 1023 + 60) as u64) << 52) * f64::from_bits((1023u64 - 60) << 52);
+        return p
+            * f64::from_bits(((ni + 1023 + 60) as u64) << 52)
+            * f64::from_bits((1023u64 - 60) << 52);
     }
     p * f64::from_bits(((ni + 1023) as u64) << 52)
 }

@@ -20,3 +20,26 @@
 //!   (nu - mu)^p exp(-(nu - mu)^2 / (2 s^2)) W_c(nu) dnu for p = 0, 1, 2
 //!   (W per unit wavenumber), for the narrow diffraction-order peaks of
 //!   periodic surfaces. Table driven (built once), any mu, any s > 0.
+// TEMPORARY STAND-IN (replaced by the spectrum branch): signatures only.
+pub const LAMBDA_MIN_NM: f64 = 360.0;
+pub const LAMBDA_MAX_NM: f64 = 830.0;
+pub struct SmoothRule {
+    pub nu_per_um: Vec<f64>,
+    pub lambda_nm: Vec<f64>,
+    pub weights: Vec<[f64; 3]>,
+}
+pub fn smooth_rule(_node_count: usize) -> &'static SmoothRule {
+    unimplemented!()
+}
+pub fn integrate_rgb_reference(_f: impl Fn(f64) -> f64, _step_nm: f64) -> [f64; 3] {
+    unimplemented!()
+}
+pub mod metals {
+    pub struct MetalTable {
+        pub name: &'static str,
+        pub lambda_nm: &'static [f64],
+        pub eta: &'static [f64],
+        pub k: &'static [f64],
+    }
+    pub const METALS: [MetalTable; 0] = [];
+}
