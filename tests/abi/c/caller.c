@@ -1,0 +1,86 @@
+/* Calls every function of stam.h through the header, as a C renderer would,
+ * and checks what C can see: NULL + message on bad parameters, finite and
+ * non-negative outputs, unit sampled directions. Returns 0 on success, or
+ * the number of the first failed check with a message in `report`. */
+#include "stam.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#define CHECK(id, cond, ...)                                  \
+    do {                                                      \
+        if (!(cond)) {                                        \
+            snprintf(report, report_len, __VA_ARGS__);        \
+            return id;                                        \
+        }                                                     \
+    } while (0)
+
+static int finite_nonneg(const float *v, size_t n) {
+    for (size_t i = 0; i < n; ++i)
+        if (!(isfinite(v[i]) && v[i] >= 0.0f)) return 0;
+    return 1;
+}
+
+int stam_c_caller_run(const char *params_json, char *report, size_t report_len) {
+    char err[256];
+    StamBrdf *bad = stam_brdf_new("{\"surface\":\"gaussian\",\"sigma_um\":-1,\"corr_um\":1}", err, sizeof err);
+    CHECK(1, bad == NULL, "invalid parameters were accepted");
+    CHECK(2, strstr(err, "sigma_um") != NULL, "error message does not name the key: %s", err);
+    CHECK(3, stam_brdf_new(NULL, err, sizeof err) == NULL, "NULL json accepted");
+    /* A tiny error buffer must be truncated, NUL-terminated. */
+    char tiny[4] = {'x', 'x', 'x', 'x'};
+    CHECK(4, stam_brdf_new("{}", tiny, sizeof tiny) == NULL && tiny[3] == '\0', "truncation");
+
+    StamBrdf *b = stam_brdf_new(params_json, err, sizeof err);
+    CHECK(5, b != NULL, "construction failed: %s", err);
+
+    enum { N = 4 };
+    const float wi[3 * N] = {0.0f, 0.0f, 1.0f, 0.6f, 0.0f, 0.8f, 0.0f, 0.0f, -1.0f, NAN, 0.0f, 1.0f};
+    const float wo[3 * N] = {0.0f, 0.0f, 1.0f, -0.6f, 0.0f, 0.8f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 1.0f};
+    const float lambda[N] = {550.0f, 450.0f, 0.0f, NAN};
+    float out[N], rgb[3 * N], wo_s[3 * N], pdf[N];
+    uint8_t coherent[N];
+    const float rnd[3 * N] = {0.1f, 0.2f, 0.3f, 0.5f, 0.5f, 0.5f, 0.9f, 0.1f, 0.7f, 0.3f, 0.8f, 0.2f};
+
+    stam_brdf_eval_spectral(b, N, wi, wo, lambda, out);
+    CHECK(6, finite_nonneg(out, N), "eval_spectral not finite/non-negative");
+    CHECK(7, out[1] > 0.0f, "eval_spectral is zero at the mirror direction: %g", out[1]);
+    CHECK(8, out[2] == 0.0f && out[3] == 0.0f, "below-horizon / NaN input not zero");
+    stam_brdf_eval_rgb(b, N, wi, wo, rgb);
+    CHECK(9, finite_nonneg(rgb, 3 * N) && rgb[3] + rgb[4] + rgb[5] > 0.0f, "eval_rgb");
+    stam_brdf_coherent_spectral(b, N, wi, lambda, out);
+    CHECK(10, finite_nonneg(out, N), "coherent_spectral");
+    stam_brdf_coherent_rgb(b, N, wi, rgb);
+    CHECK(11, finite_nonneg(rgb, 3 * N), "coherent_rgb");
+
+    stam_brdf_sample(b, N, wi, lambda, rnd, wo_s, pdf, coherent);
+    CHECK(12, finite_nonneg(pdf, N), "sample pdf");
+    for (int i = 0; i < N; ++i) {
+        if (pdf[i] > 0.0f) {
+            float len = sqrtf(wo_s[3 * i] * wo_s[3 * i] + wo_s[3 * i + 1] * wo_s[3 * i + 1] +
+                              wo_s[3 * i + 2] * wo_s[3 * i + 2]);
+            CHECK(13, fabsf(len - 1.0f) < 1e-4f, "sampled wo not unit: %g", len);
+            CHECK(14, coherent[i] <= 1, "coherent flag not 0/1");
+        }
+    }
+    stam_brdf_sample(b, N, wi, NULL, rnd, wo_s, pdf, coherent);
+    CHECK(15, finite_nonneg(pdf, N), "RGB-mode sample pdf");
+    stam_brdf_pdf(b, N, wi, wo, lambda, pdf);
+    CHECK(16, finite_nonneg(pdf, N), "pdf");
+    stam_brdf_pdf(b, N, wi, wo, NULL, pdf);
+    CHECK(17, finite_nonneg(pdf, N), "RGB-mode pdf");
+
+    uint32_t flags = stam_brdf_flags(b);
+    CHECK(18, flags < 8u, "unknown flag bits %u", flags);
+    CHECK(19, stam_brdf_memory_bytes(b) > 0 && stam_brdf_memory_bytes(b) <= (4u << 20), "memory");
+    CHECK(20, strlen(stam_version()) > 0, "version");
+
+    /* NULL material: zeros, no crash. */
+    stam_brdf_eval_spectral(NULL, N, wi, wo, lambda, out);
+    CHECK(21, out[0] == 0.0f, "NULL material must give 0");
+    CHECK(22, stam_brdf_flags(NULL) == 0u, "NULL flags");
+    stam_brdf_free(b);
+    stam_brdf_free(NULL);
+    return 0;
+}
