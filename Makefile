@@ -1,0 +1,56 @@
+# Top-level build. Targets:
+#   make core     Rust core (cargo, release): target/release/libstam.{a,so}
+#   make plugin   Mitsuba BSDF plugin: build/plugins/diffraction.so
+#   make setup    system packages + .venv (scripts/setup.sh)
+# Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
+# override to link a different build of the core).
+
+PYTHON    ?= .venv/bin/python
+CARGO     ?= cargo
+CXX       ?= g++
+BUILD     ?= build
+
+STAM_LIB_DEFAULT := target/release/libstam.a
+STAM_LIB  ?= $(STAM_LIB_DEFAULT)
+STAM_H    := rust-core/include/stam.h
+PLUGIN_SO := $(BUILD)/plugins/diffraction.so
+PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
+
+# Package locations, computed once and only when needed (no import of mitsuba).
+pkgdir = $(shell $(PYTHON) -c "import importlib.util as u; print(u.find_spec('$(1)').submodule_search_locations[0])")
+MI_DIR = $(eval MI_DIR := $(call pkgdir,mitsuba))$(MI_DIR)
+DR_DIR = $(eval DR_DIR := $(call pkgdir,drjit))$(DR_DIR)
+NB_INC = $(eval NB_INC := $(shell $(PYTHON) -c "import nanobind; print(nanobind.include_dir())"))$(NB_INC)
+
+# -march=haswell is REQUIRED: it matches the wheel's vector layout (docs/mitsuba.md).
+PLUGIN_CXXFLAGS = -std=c++17 -O3 -march=haswell -fPIC -fvisibility=hidden \
+	-DMI_ENABLE_LLVM=1 -DMI_ENABLE_CUDA=1 -DMI_ENABLE_EMBREE=1 -DMI_ENABLE_AUTODIFF=1 \
+	-Wall -Wextra -Wshadow \
+	-isystem $(MI_DIR)/include -isystem $(DR_DIR)/include -isystem $(NB_INC)
+PLUGIN_LDFLAGS = -shared -Wl,--no-undefined -Wl,--exclude-libs,ALL \
+	-L$(MI_DIR) -L$(DR_DIR) -Wl,-rpath,$(MI_DIR) -Wl,-rpath,$(DR_DIR)
+PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpthread -ldl -lm
+
+.PHONY: all core plugin setup clean-plugin
+all: plugin
+
+setup:
+	scripts/setup.sh
+
+core:
+	$(CARGO) build --release -p stam-core
+
+# The default core library is (re)built by cargo, which knows its sources.
+ifeq ($(STAM_LIB),$(STAM_LIB_DEFAULT))
+plugin: core
+	@$(MAKE) --no-print-directory $(PLUGIN_SO)
+else
+plugin: $(PLUGIN_SO)
+endif
+
+$(PLUGIN_SO): $(PLUGIN_SRC) $(STAM_H) $(STAM_LIB)
+	@mkdir -p $(dir $@)
+	$(CXX) $(PLUGIN_CXXFLAGS) $(PLUGIN_SRC) -o $@ $(PLUGIN_LDFLAGS) $(PLUGIN_LIBS)
+
+clean-plugin:
+	rm -f $(PLUGIN_SO)
