@@ -1,22 +1,66 @@
 # Single entry point. `make demo` sets everything up and renders the paper's
 # scenes; `make test` runs every test of the project (what .ci/run calls).
+# Targets:
+#   make core     Rust core (cargo, release): target/release/libstam.{a,so}
+#   make plugin   Mitsuba BSDF plugin: build/plugins/diffraction.so
+#   make setup    system packages + .venv (scripts/setup.sh)
+# Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
+# override to link a different build of the core).
 
-SHELL := /bin/bash
-VENV ?= .venv
-PY := $(VENV)/bin/python
-CARGO ?= cargo
+PYTHON    ?= .venv/bin/python
+CARGO     ?= cargo
+CXX       ?= g++
+BUILD     ?= build
+
+STAM_LIB_DEFAULT := target/release/libstam.a
+STAM_LIB  ?= $(STAM_LIB_DEFAULT)
+STAM_H    := rust-core/include/stam.h
+PLUGIN_SO := $(BUILD)/plugins/diffraction.so
+PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
+
+# Package locations, computed once and only when needed (no import of mitsuba).
+pkgdir = $(shell $(PYTHON) -c "import importlib.util as u; print(u.find_spec('$(1)').submodule_search_locations[0])")
+MI_DIR = $(eval MI_DIR := $(call pkgdir,mitsuba))$(MI_DIR)
+DR_DIR = $(eval DR_DIR := $(call pkgdir,drjit))$(DR_DIR)
+NB_INC = $(eval NB_INC := $(shell $(PYTHON) -c "import nanobind; print(nanobind.include_dir())"))$(NB_INC)
+
+# -march=haswell is REQUIRED: it matches the wheel's vector layout (docs/mitsuba.md).
+PLUGIN_CXXFLAGS = -std=c++17 -O3 -march=haswell -fPIC -fvisibility=hidden \
+	-DMI_ENABLE_LLVM=1 -DMI_ENABLE_CUDA=1 -DMI_ENABLE_EMBREE=1 -DMI_ENABLE_AUTODIFF=1 \
+	-Wall -Wextra -Wshadow \
+	-isystem $(MI_DIR)/include -isystem $(DR_DIR)/include -isystem $(NB_INC)
+PLUGIN_LDFLAGS = -shared -Wl,--no-undefined -Wl,--exclude-libs,ALL \
+	-L$(MI_DIR) -L$(DR_DIR) -Wl,-rpath,$(MI_DIR) -Wl,-rpath,$(DR_DIR)
+PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpthread -ldl -lm
+
 export CARGO_TERM_COLOR ?= never
+SHELL := /bin/bash
 
-.PHONY: demo setup core test test-rust lint bench
+.PHONY: all demo core plugin setup clean-plugin test test-rust test-python lint bench
+all: plugin
 
-demo: setup core
+demo: setup plugin
 
-# System packages, the Python venv with pinned packages (idempotent).
 setup:
 	bash scripts/setup.sh
 
 core:
 	$(CARGO) build --release -p stam-core
+
+# The default core library is (re)built by cargo, which knows its sources.
+ifeq ($(STAM_LIB),$(STAM_LIB_DEFAULT))
+plugin: core
+	@$(MAKE) --no-print-directory $(PLUGIN_SO)
+else
+plugin: $(PLUGIN_SO)
+endif
+
+$(PLUGIN_SO): $(PLUGIN_SRC) $(STAM_H) $(STAM_LIB)
+	@mkdir -p $(dir $@)
+	$(CXX) $(PLUGIN_CXXFLAGS) $(PLUGIN_SRC) -o $@ $(PLUGIN_LDFLAGS) $(PLUGIN_LIBS)
+
+clean-plugin:
+	rm -f $(PLUGIN_SO)
 
 lint:
 	$(CARGO) fmt --all -- --check
@@ -25,7 +69,11 @@ lint:
 test-rust:
 	$(CARGO) test --workspace
 
-test: setup lint test-rust
+test-python: plugin
+	$(PYTHON) -m pytest -q tests
+
+# Everything, in the order that fails fastest.
+test: setup lint test-rust test-python
 
 bench:
 	$(CARGO) bench -p stam-core --bench brdf

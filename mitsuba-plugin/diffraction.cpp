@@ -1,0 +1,896 @@
+/* diffraction.cpp: Mitsuba 3.9 BSDF plugin for Stam's diffraction shader
+ * (J. Stam, "Diffraction Shaders", SIGGRAPH 1999).
+ *
+ * This file contains no physics. It converts Mitsuba properties into the JSON
+ * parameter object of the Rust core (rust-core/include/stam.h), builds the
+ * local frame the core expects (twist, concentric tracks), and forwards
+ * eval / pdf / sample to the core's batch C ABI.
+ *
+ * Variants: scalar_* call the core per query; llvm_ad_* run in Dr.Jit's
+ * evaluated mode (dr.JitFlag.SymbolicLoops / SymbolicCalls off) and call the
+ * core once per batch; cuda_ad_* compile but refuse construction (the core is
+ * CPU code). See scripts/stam_mitsuba.py for the Python-side setup.
+ */
+
+#include <mitsuba/core/properties.h>
+#include <mitsuba/core/spectrum.h>
+#include <mitsuba/render/bsdf.h>
+#include <mitsuba/render/interaction.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "../rust-core/include/stam.h"
+
+NAMESPACE_BEGIN(mitsuba)
+
+/**!
+
+.. _bsdf-diffraction:
+
+Diffraction BSDF (:monosp:`diffraction`)
+----------------------------------------
+
+.. pluginparameters::
+
+ * - surface
+   - |string|
+   - Microsurface model: ``gaussian``, ``fractal``, ``periodic`` or ``cd``
+     (compact disc: a periodic surface with Stam's dimensions).
+ * - sigma_um
+   - |float|
+   - Gaussian surfaces: rms height (micrometres).
+ * - corr_um
+   - |float|
+   - Gaussian surfaces: isotropic correlation length T (micrometres).
+ * - corr_x_um, corr_y_um
+   - |float|
+   - Gaussian surfaces: anisotropic correlation lengths along the tangent
+     (x) and bitangent (y) (micrometres; brushed metal).
+ * - hurst
+   - |float|
+   - Fractal surfaces: Hurst exponent H in (0, 1].
+ * - lag_um
+   - |float|
+   - Fractal surfaces: lag L over which the rms height difference is sigma_um.
+ * - period_um
+   - |float|
+   - Periodic surfaces: period of the profile along the tangent.
+ * - coherence_um
+   - |float|
+   - Periodic surfaces: coherence length l of the illumination.
+ * - profile
+   - |string|
+   - Periodic surfaces: ``rect``, ``sine``, or a tabulated profile given as a
+     string of comma-separated heights in micrometres over one period
+     (passed to the core as ``{"heights_um": [...]}``).
+ * - height_um, width_um
+   - |float|
+   - Periodic surfaces: bump height and (``rect``) bump width.
+ * - fresnel
+   - |float| or |string|
+   - Reflectance F^2 as a constant, or a metal name: ``aluminium``,
+     ``silver``, ``gold``, ``copper``, ``chromium``.
+ * - eta, k
+   - |float|
+   - Alternative to ``fresnel``: complex index of refraction eta + i k
+     (passed as ``"fresnel": {"eta": .., "k": ..}``).
+ * - twist
+   - |float|
+   - Rotation of the tangent frame about the normal, in degrees (default: 0).
+ * - tracks
+   - |string|
+   - ``linear`` (default: the periodic direction is the shading tangent) or
+     ``concentric``: the periodic direction is radial about (center_u,
+     center_v) in the uv parametrisation and the grooves follow the circles.
+ * - center_u, center_v
+   - |float|
+   - Centre of concentric tracks in uv space (default: 0.5, 0.5).
+
+Only the parameters given by the user are passed to the core, which applies
+its own defaults and validates names and ranges; its error messages are
+raised as exceptions. Numeric parameters are exposed through ``mi.traverse``
+(non-differentiable); changing them rebuilds the core material.
+
+Components: 0 = the diffracted (glossy) lobe; 1 = the coherent mirror lobe
+(a delta component, present when the core reports one, e.g. Gaussian
+surfaces).
+
+In spectral variants the BSDF is evaluated at the path's wavelengths. A
+direction is sampled with the first wavelength; since Mitsuba's wavelengths
+are stratified with a random offset, that is a uniformly chosen member of the
+set, so the returned density is the mean of the core's pdf over all
+wavelengths (the multi-wavelength mixture).
+
+LLVM variants need evaluated mode: ``dr.set_flag(dr.JitFlag.SymbolicLoops,
+False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
+``scripts/stam_mitsuba.py``'s ``setup()`` does.
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="diffraction">
+            <string name="surface" value="cd"/>
+            <string name="tracks" value="concentric"/>
+            <string name="fresnel" value="aluminium"/>
+        </bsdf>
+
+    .. code-tab:: python
+
+        'type': 'diffraction',
+        'surface': 'gaussian',
+        'sigma_um': 0.2,
+        'corr_um': 2.0,
+        'fresnel': 'gold'
+*/
+
+namespace {
+
+// ---------------------------------------------------------------------------
+// Host-side batch evaluation (AoS float buffers, no Mitsuba types)
+// ---------------------------------------------------------------------------
+
+enum class Channels { Rgb, Mono, Spectral };
+
+struct CoreFree {
+    void operator()(StamBrdf *b) const { stam_brdf_free(b); }
+};
+using CorePtr = std::unique_ptr<StamBrdf, CoreFree>;
+
+/// One batch of queries and results. Inputs are AoS (as the core wants them),
+/// outputs are SoA (one contiguous run of n floats per channel) so that JIT
+/// variants can load each channel as one array.
+struct Batch {
+    size_t n = 0;
+    // Inputs
+    std::vector<float> wi;   // 3 n, core frame
+    std::vector<float> wo;   // 3 n, core frame (eval / pdf queries)
+    std::vector<float> lam;  // n * nw, lane-major (spectral only)
+    std::vector<float> rnd;  // 3 n (sampling only)
+    bool want_f = false, want_pdf = false, want_sample = false;
+    // Outputs (SoA)
+    std::vector<float> f;      // nc * n: f(wi, wo), NOT multiplied by cos
+    std::vector<float> pdf;    // n: pdf(wo), mixture over wavelengths
+    std::vector<float> s_wo;   // 3 * n: sampled direction, core frame
+    std::vector<float> s_pdf;  // n: pdf of the sample (lobe probability if coherent)
+    std::vector<float> s_coh;  // n: 1 if the coherent lobe was sampled
+    std::vector<float> s_val;  // nc * n: f at s_wo, or coherent reflectance
+};
+
+inline float luminance(const float *rgb) {
+    return 0.212671f * rgb[0] + 0.715160f * rgb[1] + 0.072169f * rgb[2];
+}
+
+/// f (AoS out, nc per lane) and/or the mixture pdf at (wi, wo) for n lanes.
+void core_eval(const StamBrdf *core, Channels ch, size_t nw, size_t n,
+               const float *wi, const float *wo, const float *lam,
+               float *f_aos, float *pdf) {
+    if (n == 0)
+        return;
+    switch (ch) {
+        case Channels::Rgb:
+            if (f_aos)
+                stam_brdf_eval_rgb(core, n, wi, wo, f_aos);
+            if (pdf)
+                stam_brdf_pdf(core, n, wi, wo, nullptr, pdf);
+            break;
+        case Channels::Mono:
+            if (f_aos) {
+                std::vector<float> rgb(3 * n);
+                stam_brdf_eval_rgb(core, n, wi, wo, rgb.data());
+                for (size_t i = 0; i < n; ++i)
+                    f_aos[i] = luminance(&rgb[3 * i]);
+            }
+            if (pdf)
+                stam_brdf_pdf(core, n, wi, wo, nullptr, pdf);
+            break;
+        case Channels::Spectral: {
+            // One (wi, wo, lambda) triple per lane and wavelength
+            size_t m = n * nw;
+            std::vector<float> wi_r(3 * m), wo_r(3 * m);
+            for (size_t i = 0; i < n; ++i)
+                for (size_t j = 0; j < nw; ++j)
+                    for (size_t c = 0; c < 3; ++c) {
+                        wi_r[3 * (i * nw + j) + c] = wi[3 * i + c];
+                        wo_r[3 * (i * nw + j) + c] = wo[3 * i + c];
+                    }
+            if (f_aos)
+                stam_brdf_eval_spectral(core, m, wi_r.data(), wo_r.data(), lam, f_aos);
+            if (pdf) {
+                std::vector<float> p(m);
+                stam_brdf_pdf(core, m, wi_r.data(), wo_r.data(), lam, p.data());
+                for (size_t i = 0; i < n; ++i) {
+                    float s = 0.f;
+                    for (size_t j = 0; j < nw; ++j)
+                        s += p[i * nw + j];
+                    pdf[i] = s / (float) nw;
+                }
+            }
+            break;
+        }
+    }
+}
+
+/// Coherent reflectance (AoS out, nc per lane).
+void core_coherent(const StamBrdf *core, Channels ch, size_t nw, size_t n,
+                   const float *wi, const float *lam, float *out) {
+    if (n == 0)
+        return;
+    switch (ch) {
+        case Channels::Rgb:
+            stam_brdf_coherent_rgb(core, n, wi, out);
+            break;
+        case Channels::Mono: {
+            std::vector<float> rgb(3 * n);
+            stam_brdf_coherent_rgb(core, n, wi, rgb.data());
+            for (size_t i = 0; i < n; ++i)
+                out[i] = luminance(&rgb[3 * i]);
+            break;
+        }
+        case Channels::Spectral: {
+            size_t m = n * nw;
+            std::vector<float> wi_r(3 * m);
+            for (size_t i = 0; i < n; ++i)
+                for (size_t j = 0; j < nw; ++j)
+                    for (size_t c = 0; c < 3; ++c)
+                        wi_r[3 * (i * nw + j) + c] = wi[3 * i + c];
+            stam_brdf_coherent_spectral(core, m, wi_r.data(), lam, out);
+            break;
+        }
+    }
+}
+
+/// AoS (nc per lane) -> SoA
+void aos_to_soa(const float *aos, size_t n, size_t k, float *soa) {
+    for (size_t i = 0; i < n; ++i)
+        for (size_t c = 0; c < k; ++c)
+            soa[c * n + i] = aos[i * k + c];
+}
+
+/// Run every requested query of a batch through the core.
+void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b) {
+    const size_t n = b.n, nc = ch == Channels::Rgb ? 3 : (ch == Channels::Mono ? 1 : nw);
+    const float *lam = ch == Channels::Spectral ? b.lam.data() : nullptr;
+    std::vector<float> aos;
+
+    if (b.want_f || b.want_pdf) {
+        if (b.want_f)
+            aos.assign(nc * n, 0.f);
+        b.pdf.assign(n, 0.f);
+        core_eval(core, ch, nw, n, b.wi.data(), b.wo.data(), lam,
+                  b.want_f ? aos.data() : nullptr, b.want_pdf ? b.pdf.data() : nullptr);
+        if (b.want_f) {
+            b.f.resize(nc * n);
+            aos_to_soa(aos.data(), n, nc, b.f.data());
+        }
+    }
+
+    if (b.want_sample) {
+        // Sample with the first wavelength of each lane (NULL = RGB mixture)
+        std::vector<float> lam0;
+        if (ch == Channels::Spectral) {
+            lam0.resize(n);
+            for (size_t i = 0; i < n; ++i)
+                lam0[i] = b.lam[i * nw];
+        }
+        std::vector<float> wo(3 * n, 0.f), pdf0(n, 0.f);
+        std::vector<uint8_t> coh(n, 0);
+        if (n)
+            stam_brdf_sample(core, n, b.wi.data(), lam0.empty() ? nullptr : lam0.data(),
+                             b.rnd.data(), wo.data(), pdf0.data(), coh.data());
+
+        // f and the mixture pdf at the sampled direction, coherent reflectance
+        std::vector<float> f(nc * n, 0.f), R(nc * n, 0.f), pmix;
+        if (ch == Channels::Spectral)
+            pmix.assign(n, 0.f);
+        core_eval(core, ch, nw, n, b.wi.data(), wo.data(), lam, f.data(),
+                  pmix.empty() ? nullptr : pmix.data());
+        core_coherent(core, ch, nw, n, b.wi.data(), lam, R.data());
+
+        b.s_wo.resize(3 * n);
+        aos_to_soa(wo.data(), n, 3, b.s_wo.data());
+        b.s_pdf.resize(n);
+        b.s_coh.resize(n);
+        b.s_val.resize(nc * n);
+        for (size_t i = 0; i < n; ++i) {
+            bool c = coh[i] != 0;
+            b.s_coh[i] = c ? 1.f : 0.f;
+            // Coherent: the lobe's discrete probability for the wavelength
+            // used (unbiased given that wavelength). Glossy: mixture density.
+            b.s_pdf[i] = (c || pmix.empty()) ? pdf0[i] : pmix[i];
+            if (!(pdf0[i] > 0.f))
+                b.s_pdf[i] = 0.f;
+            const float *src = c ? &R[i * nc] : &f[i * nc];
+            for (size_t k = 0; k < nc; ++k)
+                b.s_val[k * n + i] = src[k];
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Parameters -> JSON
+// ---------------------------------------------------------------------------
+
+std::string json_escape(const std::string &s) {
+    std::string out = "\"";
+    for (char ch : s) {
+        unsigned char c = (unsigned char) ch;
+        if (c == '"' || c == '\\') {
+            out += '\\';
+            out += ch;
+        } else if (c < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof(buf), "\\u%04x", c);
+            out += buf;
+        } else {
+            out += ch;
+        }
+    }
+    return out + "\"";
+}
+
+/// Shortest decimal form that reads back as the same double
+std::string json_number(double v) {
+    char buf[40];
+    for (int prec = 15; prec <= 17; ++prec) {
+        std::snprintf(buf, sizeof(buf), "%.*g", prec, v);
+        if (std::strtod(buf, nullptr) == v)
+            break;
+    }
+    return buf;
+}
+
+/// Parse "0.1, 0.2,0.3" into numbers; false if it is not such a list.
+bool parse_number_list(const std::string &s, std::vector<double> &out) {
+    const char *p = s.c_str();
+    out.clear();
+    while (true) {
+        while (*p == ' ' || *p == '\t' || *p == '\n')
+            ++p;
+        char *end = nullptr;
+        double v = std::strtod(p, &end);
+        if (end == p)
+            return false;
+        out.push_back(v);
+        p = end;
+        while (*p == ' ' || *p == '\t' || *p == '\n')
+            ++p;
+        if (*p == '\0')
+            return !out.empty();
+        if (*p != ',')
+            return false;
+        ++p;
+    }
+}
+
+} // namespace
+
+template <typename Float, typename Spectrum>
+class Diffraction final : public BSDF<Float, Spectrum> {
+public:
+    MI_IMPORT_BASE(BSDF, m_flags, m_components)
+    MI_IMPORT_TYPES()
+
+    enum class Tracks { Linear, Concentric };
+
+    static constexpr bool IsSpectral = is_spectral_v<Spectrum>;
+    static constexpr bool IsMono = is_monochromatic_v<Spectrum>;
+    static constexpr size_t NW = IsSpectral ? dr::size_v<Wavelength> : 0;
+    static constexpr size_t NC = dr::size_v<UnpolarizedSpectrum>;
+    static constexpr Channels Ch =
+        IsSpectral ? Channels::Spectral : (IsMono ? Channels::Mono : Channels::Rgb);
+
+    Diffraction(const Properties &props) : Base(props) {
+        if constexpr (dr::is_cuda_v<Float>)
+            Throw("diffraction: CUDA variants are not supported (the Rust core "
+                  "runs on the CPU): use an llvm_ad_* or scalar_* variant.");
+        static_assert(!IsSpectral || NW == NC, "unexpected spectrum layout");
+
+        // Plugin-level parameters are handled here; everything else is
+        // forwarded to the core under its own name (the core refuses
+        // unknown keys with a message naming them).
+        size_t count = 0;
+        for (auto it = props.begin(); it != props.end(); ++it)
+            ++count;
+        m_params.reserve(count); // never reallocated: traverse() hands out pointers
+
+        bool has_center = false;
+        for (auto it = props.begin(); it != props.end(); ++it) {
+            std::string name(it->name());
+            using PType = Properties::Type;
+            PType type = it->type();
+
+            if (name == "twist") {
+                m_twist = (ScalarFloat) it->template get<double>();
+            } else if (name == "tracks") {
+                std::string t = it->template get<std::string>();
+                if (t == "linear")
+                    m_tracks = Tracks::Linear;
+                else if (t == "concentric")
+                    m_tracks = Tracks::Concentric;
+                else
+                    Throw("diffraction: tracks = \"%s\": must be \"linear\" or "
+                          "\"concentric\"", t);
+            } else if (name == "center_u") {
+                m_center_u = (ScalarFloat) it->template get<double>();
+                has_center = true;
+            } else if (name == "center_v") {
+                m_center_v = (ScalarFloat) it->template get<double>();
+                has_center = true;
+            } else if (type == PType::Float || type == PType::Integer) {
+                double v = it->template get<double>();
+                Param p;
+                p.name = name;
+                p.kind = Param::Number;
+                p.given = v;
+                p.value = (ScalarFloat) v;
+                // eta, k: nested under "fresnel"
+                if (name == "eta" || name == "k")
+                    p.group = "fresnel";
+                m_params.push_back(p);
+            } else if (type == PType::String) {
+                std::string s = it->template get<std::string>();
+                Param p;
+                p.name = name;
+                std::vector<double> heights;
+                if (name == "profile" && s != "rect" && s != "sine" &&
+                    parse_number_list(s, heights)) {
+                    p.kind = Param::Json;
+                    std::string j = "{\"heights_um\": [";
+                    for (size_t i = 0; i < heights.size(); ++i)
+                        j += (i ? ", " : "") + json_number(heights[i]);
+                    p.text = j + "]}";
+                } else {
+                    p.kind = Param::String;
+                    p.text = s;
+                }
+                m_params.push_back(p);
+            } else if (type == PType::Bool) {
+                Param p;
+                p.name = name;
+                p.kind = Param::Bool;
+                p.text = it->template get<bool>() ? "true" : "false";
+                m_params.push_back(p);
+            } else {
+                Throw("diffraction: parameter \"%s\" has type %s; only numbers "
+                      "and strings are accepted (no textures)",
+                      name, property_type_name(type));
+            }
+        }
+
+        if (has_center && m_tracks != Tracks::Concentric)
+            Throw("diffraction: center_u/center_v only apply to "
+                  "tracks=\"concentric\"");
+        bool has_fresnel = false, has_eta_k = false;
+        for (const Param &p : m_params) {
+            has_fresnel |= p.name == "fresnel";
+            has_eta_k |= p.group == "fresnel";
+        }
+        if (has_fresnel && has_eta_k)
+            Throw("diffraction: give either \"fresnel\" or \"eta\"/\"k\", not both");
+
+        rebuild_core();
+
+        // Flags and components, declared once
+        m_has_coherent = (m_core_flags & STAM_FLAG_HAS_COHERENT) != 0;
+        uint32_t glossy = +BSDFFlags::GlossyReflection | +BSDFFlags::FrontSide;
+        if ((m_core_flags & STAM_FLAG_ANISOTROPIC) || m_twist != 0.f ||
+            m_tracks == Tracks::Concentric)
+            glossy |= +BSDFFlags::Anisotropic;
+        m_components.clear();
+        m_components.push_back(glossy);
+        if (m_has_coherent)
+            m_components.push_back(+BSDFFlags::DeltaReflection | +BSDFFlags::FrontSide);
+        m_flags = 0;
+        for (uint32_t c : m_components)
+            m_flags |= c;
+    }
+
+    void traverse(TraversalCallback *cb) override {
+        Base::traverse(cb);
+        for (Param &p : m_params)
+            if (p.kind == Param::Number)
+                cb->put(p.name, p.value, ParamFlags::NonDifferentiable);
+        cb->put("twist", m_twist, ParamFlags::NonDifferentiable);
+        if (m_tracks == Tracks::Concentric) {
+            cb->put("center_u", m_center_u, ParamFlags::NonDifferentiable);
+            cb->put("center_v", m_center_v, ParamFlags::NonDifferentiable);
+        }
+    }
+
+    void parameters_changed(const std::vector<std::string> &keys) override {
+        Base::parameters_changed(keys);
+        rebuild_core();
+        if (((m_core_flags & STAM_FLAG_HAS_COHERENT) != 0) != m_has_coherent)
+            Throw("diffraction: the change adds or removes the coherent lobe; "
+                  "the component layout is fixed at construction");
+        // Anisotropy is a hint to integrators: follow the core
+        if (m_core_flags & STAM_FLAG_ANISOTROPIC) {
+            m_components[0] |= +BSDFFlags::Anisotropic;
+            m_flags |= +BSDFFlags::Anisotropic;
+        }
+    }
+
+    // -----------------------------------------------------------------------
+    // BSDF interface
+    // -----------------------------------------------------------------------
+
+    std::pair<BSDFSample3f, Spectrum> sample(const BSDFContext &ctx,
+                                             const SurfaceInteraction3f &si,
+                                             Float sample1, const Point2f &sample2,
+                                             Mask active) const override {
+        MI_MASKED_FUNCTION(ProfilerPhase::BSDFSample, active);
+        auto [bs, weight] = sample_impl(ctx, si, sample1, sample2, active);
+        return { bs, depolarizer<Spectrum>(weight) };
+    }
+
+    Spectrum eval(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                  const Vector3f &wo, Mask active) const override {
+        MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
+        auto [value, pdf] = eval_pdf_impl(ctx, si, wo, true, false, active);
+        DRJIT_MARK_USED(pdf);
+        return depolarizer<Spectrum>(value);
+    }
+
+    Float pdf(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+              const Vector3f &wo, Mask active) const override {
+        MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
+        return eval_pdf_impl(ctx, si, wo, false, true, active).second;
+    }
+
+    std::pair<Spectrum, Float> eval_pdf(const BSDFContext &ctx,
+                                        const SurfaceInteraction3f &si,
+                                        const Vector3f &wo,
+                                        Mask active) const override {
+        MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
+        auto [value, pdf] = eval_pdf_impl(ctx, si, wo, true, true, active);
+        return { depolarizer<Spectrum>(value), pdf };
+    }
+
+    std::tuple<Spectrum, Float, BSDFSample3f, Spectrum>
+    eval_pdf_sample(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                    const Vector3f &wo, Float sample1, const Point2f &sample2,
+                    Mask active) const override {
+        MI_MASKED_FUNCTION(ProfilerPhase::BSDFSample, active);
+        Query q = make_query(ctx, si, &wo, &sample1, &sample2, true, true, active);
+        return { depolarizer<Spectrum>(q.value), q.pdf, q.bs,
+                 depolarizer<Spectrum>(q.weight) };
+    }
+
+    std::string to_string() const override {
+        std::ostringstream oss;
+        oss << "Diffraction[" << std::endl;
+        for (const Param &p : m_params) {
+            oss << "  " << p.name << " = ";
+            if (p.kind == Param::Number)
+                oss << number_text(p);
+            else if (p.kind == Param::String)
+                oss << json_escape(p.text);
+            else
+                oss << p.text;
+            oss << "," << std::endl;
+        }
+        oss << "  twist = " << m_twist << "," << std::endl
+            << "  tracks = " << (m_tracks == Tracks::Linear ? "linear" : "concentric");
+        if (m_tracks == Tracks::Concentric)
+            oss << "," << std::endl
+                << "  center_u = " << m_center_u << "," << std::endl
+                << "  center_v = " << m_center_v;
+        oss << "," << std::endl
+            << "  core_json = " << m_json << "," << std::endl
+            << "  coherent_lobe = " << (m_has_coherent ? "true" : "false") << std::endl
+            << "]";
+        return oss.str();
+    }
+
+    MI_DECLARE_CLASS(Diffraction)
+
+private:
+    /// A parameter forwarded to the core
+    struct Param {
+        enum Kind { Number, String, Bool, Json } kind = Number;
+        std::string name;
+        std::string group;  // non-empty: nested in an object of that name
+        double given = 0.0; // number as given by the user
+        ScalarFloat value = 0.f; // number as exposed by traverse()
+        std::string text;   // string value, or raw JSON
+    };
+
+    /// Everything one call can ask of the core, in the local frame
+    struct Query {
+        UnpolarizedSpectrum value;  // f * cos at wo
+        Float pdf;                  // pdf at wo
+        BSDFSample3f bs;
+        UnpolarizedSpectrum weight; // sample weight
+    };
+
+    std::string number_text(const Param &p) const {
+        // The user's value unless traverse() changed it
+        if ((ScalarFloat) p.given == p.value)
+            return json_number(p.given);
+        char buf[32];
+        std::snprintf(buf, sizeof(buf), "%.9g", (double) p.value);
+        return buf;
+    }
+
+    std::string build_json() const {
+        std::string top, nested;
+        for (const Param &p : m_params) {
+            std::string v;
+            switch (p.kind) {
+                case Param::Number:
+                    if (!std::isfinite(p.value))
+                        Throw("diffraction: parameter \"%s\" must be finite", p.name);
+                    v = number_text(p);
+                    break;
+                case Param::String: v = json_escape(p.text); break;
+                case Param::Bool:
+                case Param::Json: v = p.text; break;
+            }
+            std::string &dst = p.group.empty() ? top : nested;
+            dst += (dst.empty() ? "" : ", ") + json_escape(p.name) + ": " + v;
+        }
+        if (!nested.empty())
+            top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
+        return "{" + top + "}";
+    }
+
+    void rebuild_core() {
+        if (!std::isfinite(m_twist) || !std::isfinite(m_center_u) ||
+            !std::isfinite(m_center_v))
+            Throw("diffraction: twist, center_u and center_v must be finite");
+        std::string json = build_json();
+        char err[1024] = { 0 };
+        StamBrdf *core = stam_brdf_new(json.c_str(), err, sizeof(err));
+        if (!core)
+            Throw("diffraction: %s", err[0] ? err : "the core refused the parameters");
+        m_core.reset(core);
+        m_json = std::move(json);
+        m_core_flags = stam_brdf_flags(core);
+        double t = (double) m_twist * M_PI / 180.0;
+        m_cos_twist = (ScalarFloat) std::cos(t);
+        m_sin_twist = (ScalarFloat) std::sin(t);
+    }
+
+    /// Rotation (c, s) of the core's tangent in the local (xy) plane: core
+    /// x = (c, s, 0), core y = (-s, c, 0).
+    std::pair<Float, Float> frame_rotation(const SurfaceInteraction3f &si) const {
+        if (m_tracks == Tracks::Linear)
+            return { Float(m_cos_twist), Float(m_sin_twist) };
+        // Groove direction: tangent of the circle |uv - centre| = const,
+        // mapped to the surface by (dp_du, dp_dv); periodic direction = groove x n.
+        Float du = si.uv.x() - m_center_u, dv = si.uv.y() - m_center_v;
+        Vector3f g = si.sh_frame.to_local(si.dp_du * (-dv) + si.dp_dv * du);
+        Float len = dr::sqrt(dr::square(g.x()) + dr::square(g.y()));
+        Mask ok = len > 1e-20f && dr::isfinite(len);
+        Float inv = dr::select(ok, dr::rcp(len), 0.f);
+        // Degenerate (centre, or no uv parametrisation): the shading tangent
+        Float c0 = dr::select(ok, g.y() * inv, 1.f),
+              s0 = dr::select(ok, -g.x() * inv, 0.f);
+        return { c0 * m_cos_twist - s0 * m_sin_twist,
+                 s0 * m_cos_twist + c0 * m_sin_twist };
+    }
+
+    static Vector3f to_core(const Vector3f &w, const Float &c, const Float &s) {
+        return { c * w.x() + s * w.y(), -s * w.x() + c * w.y(), w.z() };
+    }
+    static Vector3f from_core(const Vector3f &v, const Float &c, const Float &s) {
+        return { c * v.x() - s * v.y(), s * v.x() + c * v.y(), v.z() };
+    }
+
+    /// The one place that talks to the core. wo / sample1 / sample2 may be
+    /// null; want_value / want_pdf select the eval outputs.
+    Query make_query(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                     const Vector3f *wo, const Float *sample1, const Point2f *sample2,
+                     bool want_value, bool want_pdf, Mask active) const {
+        Query q;
+        q.value = dr::zeros<UnpolarizedSpectrum>();
+        q.pdf = dr::zeros<Float>();
+        q.bs = dr::zeros<BSDFSample3f>();
+        q.weight = dr::zeros<UnpolarizedSpectrum>();
+
+        const bool glossy = ctx.is_enabled(BSDFFlags::GlossyReflection, 0),
+                   delta = m_has_coherent && ctx.is_enabled(BSDFFlags::DeltaReflection, 1);
+        const bool do_eval = wo && glossy && (want_value || want_pdf),
+                   do_sample = sample1 && sample2 && (glossy || delta);
+        if (!do_eval && !do_sample)
+            return q;
+
+        Float cos_i = Frame3f::cos_theta(si.wi);
+        Mask active_e = active && cos_i > 0.f, active_s = active_e;
+        if (do_eval)
+            active_e &= Frame3f::cos_theta(*wo) > 0.f;
+        if (dr::none_or<false>(active_e || active_s))
+            return q;
+
+        auto [c, s] = frame_rotation(si);
+        Vector3f wi_c = to_core(si.wi, c, s);
+        Vector3f wo_c = do_eval ? to_core(*wo, c, s) : Vector3f(0.f, 0.f, 1.f);
+        // Lanes outside the hemisphere: a below-horizon wi makes the core return 0
+        wi_c = dr::select(active_e || active_s, wi_c, Vector3f(0.f, 0.f, -1.f));
+
+        Batch b;
+        b.want_f = do_eval && want_value;
+        b.want_pdf = do_eval && want_pdf;
+        b.want_sample = do_sample;
+
+        // ---- Stage inputs, call the core, read outputs --------------------
+        std::vector<Float> out_f, out_pdf, out_swo, out_spdf, out_scoh, out_sval;
+        if constexpr (!dr::is_jit_v<Float>) {
+            b.n = 1;
+            b.wi = { wi_c.x(), wi_c.y(), wi_c.z() };
+            b.wo = { wo_c.x(), wo_c.y(), wo_c.z() };
+            if constexpr (IsSpectral)
+                for (size_t j = 0; j < NW; ++j)
+                    b.lam.push_back(si.wavelengths[j]);
+            if (do_sample)
+                b.rnd = { *sample1, sample2->x(), sample2->y() };
+            run_batch(m_core.get(), Ch, NW, b);
+        } else if constexpr (dr::is_llvm_v<Float>) {
+            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
+                Throw("diffraction: the native core needs concrete arrays, but this "
+                      "call is being recorded symbolically. Disable "
+                      "dr.JitFlag.SymbolicLoops and dr.JitFlag.SymbolicCalls "
+                      "(evaluated mode), e.g. with scripts/stam_mitsuba.py's setup(), "
+                      "and do not use dr.freeze with this BSDF.");
+            stage_jit(b, wi_c, wo_c, si, sample1, sample2, do_sample, active_e || active_s);
+            run_batch(m_core.get(), Ch, NW, b);
+        } else {
+            Throw("diffraction: unsupported backend");
+        }
+
+        // ---- Eval / pdf ----------------------------------------------------
+        if (do_eval) {
+            Float cos_o = Frame3f::cos_theta(*wo);
+            if (b.want_f) {
+                UnpolarizedSpectrum f = load_spectrum(b.f, b.n);
+                q.value = dr::select(active_e, f * cos_o, 0.f);
+            }
+            if (b.want_pdf)
+                q.pdf = dr::select(active_e, load(b.pdf, 0, b.n), 0.f);
+        }
+
+        // ---- Sample --------------------------------------------------------
+        if (do_sample) {
+            Vector3f swo_c(load(b.s_wo, 0, b.n), load(b.s_wo, 1, b.n),
+                           load(b.s_wo, 2, b.n));
+            Float spdf = load(b.s_pdf, 0, b.n);
+            Mask coh = load(b.s_coh, 0, b.n) > .5f;
+            UnpolarizedSpectrum sval = load_spectrum(b.s_val, b.n);
+
+            Vector3f swo = from_core(swo_c, c, s);
+            Float cos_o = Frame3f::cos_theta(swo);
+            Mask ok = active_s && spdf > 0.f && cos_o > 0.f &&
+                      dr::select(coh, Mask(delta), Mask(glossy));
+
+            q.bs.wo = swo;
+            q.bs.pdf = dr::select(ok, spdf, 0.f);
+            q.bs.eta = 1.f;
+            q.bs.sampled_component = dr::select(coh, UInt32(1), UInt32(0));
+            q.bs.sampled_type = dr::select(coh, UInt32(+BSDFFlags::DeltaReflection),
+                                           UInt32(+BSDFFlags::GlossyReflection));
+            Float inv_pdf = dr::select(ok, dr::rcp(spdf), 0.f);
+            q.weight = sval * dr::select(coh, inv_pdf, cos_o * inv_pdf);
+            q.weight = dr::select(ok, q.weight, 0.f);
+        }
+        return q;
+    }
+
+    std::pair<UnpolarizedSpectrum, Float>
+    eval_pdf_impl(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                  const Vector3f &wo, bool want_value, bool want_pdf, Mask active) const {
+        Query q = make_query(ctx, si, &wo, nullptr, nullptr, want_value, want_pdf, active);
+        return { q.value, q.pdf };
+    }
+
+    std::pair<BSDFSample3f, UnpolarizedSpectrum>
+    sample_impl(const BSDFContext &ctx, const SurfaceInteraction3f &si, Float sample1,
+                const Point2f &sample2, Mask active) const {
+        Query q = make_query(ctx, si, nullptr, &sample1, &sample2, false, false, active);
+        return { q.bs, q.weight };
+    }
+
+    // ---- Host <-> Mitsuba types ---------------------------------------------
+
+    /// Channel k of an SoA host buffer as a Float
+    static Float load(const std::vector<float> &soa, size_t k, size_t n) {
+        if constexpr (dr::is_jit_v<Float>)
+            return dr::load<Float>(soa.data() + k * n, n);
+        else
+            return soa[k];
+    }
+
+    static UnpolarizedSpectrum load_spectrum(const std::vector<float> &soa, size_t n) {
+        UnpolarizedSpectrum r;
+        for (size_t k = 0; k < NC; ++k)
+            r[k] = load(soa, k, n);
+        return r;
+    }
+
+    /// JIT variants: evaluate the inputs and copy them into the batch (AoS).
+    void stage_jit(Batch &b, const Vector3f &wi_c, const Vector3f &wo_c,
+                   const SurfaceInteraction3f &si, const Float *sample1,
+                   const Point2f *sample2, bool do_sample, const Mask &active) const {
+        if constexpr (dr::is_jit_v<Float>) {
+            std::vector<Float> in;
+            for (size_t k = 0; k < 3; ++k)
+                in.push_back(dr::detach(wi_c[k]));
+            for (size_t k = 0; k < 3; ++k)
+                in.push_back(dr::detach(wo_c[k]));
+            if constexpr (IsSpectral)
+                for (size_t j = 0; j < NW; ++j)
+                    in.push_back(dr::detach(si.wavelengths[j]));
+            if (do_sample) {
+                in.push_back(dr::detach(*sample1));
+                in.push_back(dr::detach(sample2->x()));
+                in.push_back(dr::detach(sample2->y()));
+            }
+            size_t n = dr::width(active);
+            for (const Float &x : in)
+                n = std::max(n, dr::width(x));
+            for (Float &x : in)
+                dr::schedule(x);
+            dr::eval();
+            dr::sync_thread();
+
+            std::vector<const float *> ptr(in.size());
+            for (size_t k = 0; k < in.size(); ++k)
+                ptr[k] = in[k].data();
+            // Width-1 arrays (literals) broadcast over the batch
+            auto get = [&](size_t k, size_t i) {
+                return dr::width(in[k]) == 1 ? ptr[k][0] : ptr[k][i];
+            };
+
+            b.n = n;
+            b.wi.resize(3 * n);
+            b.wo.resize(3 * n);
+            for (size_t i = 0; i < n; ++i)
+                for (size_t k = 0; k < 3; ++k) {
+                    b.wi[3 * i + k] = get(k, i);
+                    b.wo[3 * i + k] = get(3 + k, i);
+                }
+            size_t at = 6;
+            if constexpr (IsSpectral) {
+                b.lam.resize(NW * n);
+                for (size_t i = 0; i < n; ++i)
+                    for (size_t j = 0; j < NW; ++j)
+                        b.lam[i * NW + j] = get(at + j, i);
+                at += NW;
+            }
+            if (do_sample) {
+                b.rnd.resize(3 * n);
+                for (size_t i = 0; i < n; ++i)
+                    for (size_t k = 0; k < 3; ++k)
+                        b.rnd[3 * i + k] = get(at + k, i);
+            }
+        } else {
+            DRJIT_MARK_USED(b); DRJIT_MARK_USED(wi_c); DRJIT_MARK_USED(wo_c);
+            DRJIT_MARK_USED(si); DRJIT_MARK_USED(sample1); DRJIT_MARK_USED(sample2);
+            DRJIT_MARK_USED(do_sample); DRJIT_MARK_USED(active);
+        }
+    }
+
+    // ---- Members ----------------------------------------------------------
+
+    std::vector<Param> m_params;
+    ScalarFloat m_twist = 0.f;
+    Tracks m_tracks = Tracks::Linear;
+    ScalarFloat m_center_u = 0.5f, m_center_v = 0.5f;
+
+    ScalarFloat m_cos_twist = 1.f, m_sin_twist = 0.f;
+    std::string m_json;
+    CorePtr m_core;
+    uint32_t m_core_flags = 0;
+    bool m_has_coherent = false;
+
+    MI_TRAVERSE_CB(Base)
+};
+
+MI_EXPORT_PLUGIN(Diffraction)
+NAMESPACE_END(mitsuba)

@@ -1,0 +1,553 @@
+"""Tests of the Mitsuba `diffraction` BSDF plugin (build/plugins/diffraction.so).
+
+Patterns follow Mitsuba's own BSDF tests (src/bsdfs/tests): creation and flags,
+eval == eval_pdf[0], pdf == eval_pdf[1], chi2 of sample vs pdf, sample weight
+* pdf == eval, bs.pdf == pdf(bs.wo); plus checks against the core's C ABI
+(target/release/libstam.so through ctypes), the Beckmann limit (Mitsuba's
+roughconductor), bad parameters, and renders in every supported variant.
+
+Run: make core plugin && .venv/bin/python -m pytest tests/test_plugin.py
+"""
+
+import ctypes
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, 'scripts'))
+import stam_mitsuba  # noqa: E402
+
+# DRJIT_LIBLLVM_PATH must be set before drjit is imported
+stam_mitsuba.configure_env()
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
+
+SCALAR_VARIANTS = ['scalar_rgb', 'scalar_spectral']
+LLVM_VARIANTS = ['llvm_ad_rgb', 'llvm_ad_spectral', 'llvm_ad_mono']
+ALL_VARIANTS = SCALAR_VARIANTS + LLVM_VARIANTS
+
+# One configuration per surface model (core JSON names, micrometres)
+SURFACES = {
+    'gaussian': {'surface': 'gaussian', 'sigma_um': 0.1, 'corr_um': 2.0},
+    'gaussian_rough': {'surface': 'gaussian', 'sigma_um': 0.5, 'corr_um': 5.0},
+    'gaussian_aniso': {'surface': 'gaussian', 'sigma_um': 0.1,
+                       'corr_x_um': 1.0, 'corr_y_um': 4.0},
+    'fractal': {'surface': 'fractal', 'sigma_um': 0.05, 'hurst': 0.7, 'lag_um': 1.0},
+    'periodic_rect': {'surface': 'periodic', 'period_um': 2.5, 'profile': 'rect',
+                      'height_um': 0.15, 'width_um': 0.5, 'coherence_um': 5.0},
+    'periodic_sine': {'surface': 'periodic', 'period_um': 2.0, 'profile': 'sine',
+                      'height_um': 0.2, 'coherence_um': 5.0},
+    'periodic_table': {'surface': 'periodic', 'period_um': 2.0,
+                       'profile': '0, 0.05, 0.1, 0.15, 0.1, 0.05',
+                       'coherence_um': 5.0},
+    'cd': {'surface': 'cd'},
+}
+
+WI_LIST = [[0.0, 0.0, 1.0],
+           [0.3, 0.2, math.sqrt(1 - 0.13)],
+           [math.sqrt(1 - 0.05 ** 2), 0.0, 0.05]]   # grazing
+
+
+def use(variant):
+    return stam_mitsuba.setup(variant)
+
+
+def bsdf_dict(surface, **extra):
+    d = {'type': 'diffraction'}
+    d.update(SURFACES[surface])
+    d.update(extra)
+    return d
+
+
+def make_si(wi, n=1, wavelengths=(450.0, 520.0, 590.0, 660.0), uv=(0.5, 0.5)):
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(wi)
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    si.uv = mi.Point2f(uv)
+    si.dp_du = mi.Vector3f(1, 0, 0)
+    si.dp_dv = mi.Vector3f(0, 1, 0)
+    if mi.is_spectral:
+        si.wavelengths = list(wavelengths)
+    return si
+
+
+def hemisphere_dirs(n, seed=1, min_z=0.02):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    v[:, 2] = np.abs(v[:, 2])
+    v = v[v[:, 2] > min_z]
+    return v
+
+
+def to_np(x):
+    return np.array(x, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------
+# Creation and flags
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'llvm_ad_rgb'])
+@pytest.mark.parametrize('surface', list(SURFACES))
+def test01_create(variant, surface):
+    use(variant)
+    b = mi.load_dict(bsdf_dict(surface))
+    assert b is not None
+    n = b.component_count()
+    assert n in (1, 2)
+    assert mi.has_flag(b.flags(0), mi.BSDFFlags.GlossyReflection)
+    assert mi.has_flag(b.flags(0), mi.BSDFFlags.FrontSide)
+    if n == 2:
+        assert mi.has_flag(b.flags(1), mi.BSDFFlags.DeltaReflection)
+    total = 0
+    for i in range(n):
+        total |= int(b.flags(i))
+    assert int(b.flags()) == total
+    # Gaussian surfaces have a coherent lobe, fractal and periodic ones do not
+    if surface.startswith('gaussian'):
+        assert n == 2
+    if surface.startswith('periodic') or surface == 'cd':
+        assert mi.has_flag(b.flags(0), mi.BSDFFlags.Anisotropic)
+    assert 'Diffraction[' in str(b)
+
+
+@pytest.mark.parametrize('variant', ['scalar_rgb'])
+def test02_anisotropic_flag_for_twist_and_tracks(variant):
+    use(variant)
+    b = mi.load_dict(bsdf_dict('gaussian', twist=10.0))
+    assert mi.has_flag(b.flags(0), mi.BSDFFlags.Anisotropic)
+    b = mi.load_dict(bsdf_dict('cd', tracks='concentric'))
+    assert mi.has_flag(b.flags(0), mi.BSDFFlags.Anisotropic)
+
+
+def test03_cuda_refused_by_helper():
+    with pytest.raises(ValueError, match='CUDA'):
+        stam_mitsuba.setup('cuda_ad_rgb')
+
+
+# ---------------------------------------------------------------------------
+# eval / pdf / eval_pdf / eval_pdf_sample consistency
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'scalar_spectral'])
+@pytest.mark.parametrize('surface', ['gaussian', 'fractal', 'periodic_rect', 'cd'])
+def test04_eval_pdf_scalar(variant, surface):
+    use(variant)
+    b = mi.load_dict(bsdf_dict(surface))
+    ctx = mi.BSDFContext()
+    for wi in WI_LIST:
+        si = make_si(wi)
+        for wo in hemisphere_dirs(40):
+            wo = mi.Vector3f(wo)
+            v = b.eval(ctx, si, wo)
+            p = b.pdf(ctx, si, wo)
+            v2, p2 = b.eval_pdf(ctx, si, wo)
+            assert np.allclose(to_np(v), to_np(v2), rtol=1e-5, atol=1e-7)
+            assert np.isclose(float(p), float(p2), rtol=1e-5, atol=1e-7)
+            assert np.all(np.isfinite(to_np(v))) and np.all(to_np(v) >= 0)
+            v3, p3, _, _ = b.eval_pdf_sample(ctx, si, wo, 0.3, mi.Point2f(0.4, 0.6))
+            assert np.allclose(to_np(v), to_np(v3), rtol=1e-5, atol=1e-7)
+            assert np.isclose(float(p), float(p3), rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+@pytest.mark.parametrize('surface', ['gaussian', 'fractal', 'periodic_rect', 'cd'])
+def test05_eval_pdf_vectorized(variant, surface):
+    use(variant)
+    b = mi.load_dict(bsdf_dict(surface))
+    ctx = mi.BSDFContext()
+    d = hemisphere_dirs(500)
+    wo = mi.Vector3f(d[:, 0], d[:, 1], d[:, 2])
+    for wi in WI_LIST:
+        si = make_si(wi, n=len(d))
+        v = b.eval(ctx, si, wo)
+        p = b.pdf(ctx, si, wo)
+        v2, p2 = b.eval_pdf(ctx, si, wo)
+        assert np.allclose(to_np(v), to_np(v2), rtol=1e-5, atol=1e-7)
+        assert np.allclose(to_np(p), to_np(p2), rtol=1e-5, atol=1e-7)
+        assert np.all(np.isfinite(to_np(v))) and np.all(np.isfinite(to_np(p)))
+
+
+@pytest.mark.parametrize('variant', ['scalar_spectral', 'llvm_ad_spectral'])
+def test06_zero_wavelength_is_safe(variant):
+    """Mitsuba's chi2 adapter leaves si.wavelengths at 0."""
+    use(variant)
+    b = mi.load_dict(bsdf_dict('gaussian'))
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wi = mi.Vector3f(0, 0, 1)
+    ctx = mi.BSDFContext()
+    v, p = b.eval_pdf(ctx, si, mi.Vector3f(0.1, 0, math.sqrt(0.99)))
+    assert np.all(np.isfinite(to_np(v))) and np.all(np.isfinite(to_np(p)))
+    bs, w = b.sample(ctx, si, 0.5, mi.Point2f(0.3, 0.3))
+    assert np.all(np.isfinite(to_np(w)))
+
+
+# ---------------------------------------------------------------------------
+# Sampling: chi2, weight * pdf == eval, bs.pdf == pdf(bs.wo)
+# ---------------------------------------------------------------------------
+
+def spectral_adapter(bsdf, wi, ctx, wavelengths):
+    """Like mi.chi2.BSDFAdapter, with non-zero wavelengths (spectral variants)."""
+    def make_si_n(n):
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = wi
+        si.uv = [0.5, 0.5]
+        si.wavelengths = list(wavelengths)
+        return si
+
+    def sample_functor(sample, *args):
+        n = dr.width(sample)
+        bs, weight = bsdf.sample(ctx, make_si_n(n), sample[0],
+                                 mi.Vector2f([sample[1], sample[2]]))
+        w = dr.full(mi.Float, 1.0, dr.width(weight))
+        w[dr.all(weight == 0)] = 0
+        return bs.wo, w
+
+    def pdf_functor(wo, *args):
+        return bsdf.pdf(ctx, make_si_n(dr.width(wo)), wo)
+
+    return sample_functor, pdf_functor
+
+
+def glossy_ctx():
+    ctx = mi.BSDFContext()
+    ctx.type_mask = +mi.BSDFFlags.GlossyReflection   # the delta lobe has no density
+    return ctx
+
+
+@pytest.mark.parametrize('surface', ['gaussian', 'gaussian_aniso', 'fractal',
+                                     'periodic_rect', 'periodic_sine', 'cd'])
+@pytest.mark.parametrize('wi', WI_LIST)
+def test07_chi2_rgb(surface, wi):
+    use('llvm_ad_rgb')
+    extra = bsdf_dict(surface)
+    sample_func, pdf_func = mi.chi2.BSDFAdapter('diffraction', extra, wi=wi,
+                                                ctx=glossy_ctx())
+    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(),
+                                 sample_func=sample_func, pdf_func=pdf_func,
+                                 sample_dim=3, sample_count=400000, res=101)
+    assert chi2.run(), chi2.messages
+
+
+@pytest.mark.parametrize('surface', ['gaussian', 'fractal', 'periodic_rect'])
+@pytest.mark.parametrize('wi', WI_LIST[1:])
+def test08_chi2_spectral(surface, wi):
+    """Sampling with the first wavelength, pdf = mean over the four wavelengths."""
+    use('llvm_ad_spectral')
+    b = mi.load_dict(bsdf_dict(surface))
+    sample_func, pdf_func = spectral_adapter(b, wi, glossy_ctx(),
+                                             (450.0, 520.0, 590.0, 660.0))
+    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(),
+                                 sample_func=sample_func, pdf_func=pdf_func,
+                                 sample_dim=3, sample_count=400000, res=101)
+    assert chi2.run(), chi2.messages
+
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'scalar_spectral'])
+@pytest.mark.parametrize('surface', ['gaussian', 'fractal', 'periodic_rect', 'cd'])
+def test09_sample_weight_and_pdf(variant, surface):
+    use(variant)
+    b = mi.load_dict(bsdf_dict(surface))
+    ctx = mi.BSDFContext()
+    rng = np.random.default_rng(3)
+    n_glossy = 0
+    for wi in WI_LIST:
+        si = make_si(wi)
+        for _ in range(60):
+            s = rng.random(3)
+            bs, w = b.sample(ctx, si, float(s[0]), mi.Point2f(float(s[1]), float(s[2])))
+            w = to_np(w)
+            assert np.all(np.isfinite(w)) and np.all(w >= 0)
+            if np.all(w == 0):
+                continue
+            if mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection):
+                assert bs.sampled_component == 1
+                # the mirror direction
+                assert np.allclose(to_np(bs.wo), [-wi[0], -wi[1], wi[2]], atol=1e-4)
+                continue
+            n_glossy += 1
+            assert bs.sampled_component == 0
+            v, p = b.eval_pdf(ctx, si, bs.wo)
+            assert np.isclose(float(bs.pdf), float(p), rtol=1e-3)
+            assert np.allclose(w * float(bs.pdf), to_np(v), rtol=1e-3, atol=1e-6)
+    assert n_glossy > 0
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test10_sample_weight_and_pdf_vectorized(variant):
+    use(variant)
+    b = mi.load_dict(bsdf_dict('gaussian'))
+    ctx = glossy_ctx()
+    n = 2000
+    rng = np.random.default_rng(4)
+    s = rng.random((n, 3))
+    for wi in WI_LIST:
+        si = make_si(wi, n=n)
+        bs, w = b.sample(ctx, si, mi.Float(s[:, 0]), mi.Point2f(s[:, 1], s[:, 2]))
+        v, p = b.eval_pdf(ctx, si, bs.wo)
+        w, v, p, bp = to_np(w), to_np(v), to_np(p), to_np(bs.pdf)
+        ok = np.any(w > 0, axis=0)
+        assert ok.sum() > n // 4
+        assert np.allclose(bp[ok], p[ok], rtol=1e-3)
+        assert np.allclose((w * bp)[:, ok], v[:, ok], rtol=1e-3, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------
+# The plugin forwards to the core: eval == core f * cos
+# ---------------------------------------------------------------------------
+
+def load_core():
+    path = os.environ.get('STAM_CORE_LIB',
+                          os.path.join(ROOT, 'target', 'release', 'libstam.so'))
+    lib = ctypes.CDLL(path)
+    fp = ctypes.POINTER(ctypes.c_float)
+    lib.stam_brdf_new.restype = ctypes.c_void_p
+    lib.stam_brdf_new.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
+    lib.stam_brdf_free.argtypes = [ctypes.c_void_p]
+    lib.stam_brdf_eval_rgb.argtypes = [ctypes.c_void_p, ctypes.c_size_t, fp, fp, fp]
+    lib.stam_brdf_eval_spectral.argtypes = [ctypes.c_void_p, ctypes.c_size_t, fp, fp, fp, fp]
+    return lib
+
+
+def core_eval(lib, params_json, wi, wo, lam=None):
+    err = ctypes.create_string_buffer(512)
+    b = lib.stam_brdf_new(params_json.encode(), err, 512)
+    assert b, err.value.decode()
+    try:
+        n = len(wo)
+        fp = ctypes.POINTER(ctypes.c_float)
+        wi_a = np.ascontiguousarray(np.tile(np.asarray(wi, np.float32), (n, 1)))
+        wo_a = np.ascontiguousarray(np.asarray(wo, np.float32))
+        if lam is None:
+            out = np.zeros((n, 3), np.float32)
+            lib.stam_brdf_eval_rgb(b, n, wi_a.ctypes.data_as(fp), wo_a.ctypes.data_as(fp),
+                                   out.ctypes.data_as(fp))
+        else:
+            out = np.zeros(n, np.float32)
+            lam_a = np.full(n, lam, np.float32)
+            lib.stam_brdf_eval_spectral(b, n, wi_a.ctypes.data_as(fp), wo_a.ctypes.data_as(fp),
+                                        lam_a.ctypes.data_as(fp), out.ctypes.data_as(fp))
+        return out
+    finally:
+        lib.stam_brdf_free(b)
+
+
+def params_json(surface):
+    import json
+    return json.dumps(SURFACES[surface])
+
+
+@pytest.mark.parametrize('surface', ['gaussian', 'gaussian_aniso', 'fractal', 'periodic_rect'])
+def test11_plugin_equals_core_times_cos(surface):
+    lib = load_core()
+    use('scalar_rgb')
+    b = mi.load_dict(bsdf_dict(surface))
+    ctx = mi.BSDFContext()
+    wo = hemisphere_dirs(50, seed=7)
+    for wi in WI_LIST[:2]:
+        ref = core_eval(lib, params_json(surface), wi, wo) * wo[:, 2:3]
+        si = make_si(wi)
+        got = np.array([to_np(b.eval(ctx, si, mi.Vector3f(d))) for d in wo])
+        assert np.allclose(got, ref, rtol=1e-5, atol=1e-8)
+
+    use('scalar_spectral')
+    b = mi.load_dict(bsdf_dict(surface))
+    lams = (450.0, 520.0, 590.0, 660.0)
+    wi = WI_LIST[1]
+    si = make_si(wi, wavelengths=lams)
+    got = np.array([to_np(b.eval(ctx, si, mi.Vector3f(d))) for d in wo])
+    for j, lam in enumerate(lams):
+        ref = core_eval(lib, params_json(surface), wi, wo, lam) * wo[:, 2]
+        assert np.allclose(got[:, j], ref, rtol=1e-5, atol=1e-8)
+
+
+@pytest.mark.parametrize('twist', [30.0, 90.0])
+def test12_twist_rotates_the_frame(twist):
+    """twist = t: the core sees directions rotated by -t about the normal."""
+    lib = load_core()
+    use('scalar_rgb')
+    surface = 'periodic_rect'
+    b = mi.load_dict(bsdf_dict(surface, twist=twist))
+    ctx = mi.BSDFContext()
+    t = math.radians(twist)
+    c, s = math.cos(t), math.sin(t)
+
+    def rot(v):   # world (local shading) -> core frame
+        return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+    wi = WI_LIST[1]
+    wo = hemisphere_dirs(40, seed=9)
+    ref = core_eval(lib, params_json(surface), rot(wi), np.array([rot(d) for d in wo]))
+    ref *= wo[:, 2:3]
+    si = make_si(wi)
+    got = np.array([to_np(b.eval(ctx, si, mi.Vector3f(d))) for d in wo])
+    assert np.allclose(got, ref, rtol=1e-4, atol=1e-7)
+
+
+def test13_concentric_tracks_frame():
+    """On a uv square with dp_du = x, dp_dv = y and centre (0.5, 0.5): at
+    uv = (0.8, 0.5) the periodic direction is +x (like linear tracks); at
+    uv = (0.5, 0.8) it is +y (like twist = 90)."""
+    use('scalar_rgb')
+    ctx = mi.BSDFContext()
+    conc = mi.load_dict(bsdf_dict('cd', tracks='concentric'))
+    lin0 = mi.load_dict(bsdf_dict('cd'))
+    lin90 = mi.load_dict(bsdf_dict('cd', twist=90.0))
+    wi = WI_LIST[1]
+    for d in hemisphere_dirs(40, seed=11):
+        wo = mi.Vector3f(d)
+        a = to_np(conc.eval(ctx, make_si(wi, uv=(0.8, 0.5)), wo))
+        r = to_np(lin0.eval(ctx, make_si(wi), wo))
+        assert np.allclose(a, r, rtol=1e-4, atol=1e-7)
+        a = to_np(conc.eval(ctx, make_si(wi, uv=(0.5, 0.8)), wo))
+        r = to_np(lin90.eval(ctx, make_si(wi), wo))
+        assert np.allclose(a, r, rtol=1e-4, atol=1e-7)
+
+
+# ---------------------------------------------------------------------------
+# External oracle: the Beckmann limit (physics.md)
+# ---------------------------------------------------------------------------
+
+def test14_beckmann_limit():
+    """Large g: f -> D_Beckmann(alpha = 2 sigma / T) / (4 cos_i cos_o) with F = 1;
+    Mitsuba's roughconductor (material none: F = 1) agrees near normal incidence
+    where Smith shadowing ~ 1."""
+    use('scalar_rgb')
+    sigma, T = 0.5, 5.0
+    alpha = 2 * sigma / T
+    ours = mi.load_dict({'type': 'diffraction', 'surface': 'gaussian',
+                         'sigma_um': sigma, 'corr_um': T, 'fresnel': 1.0})
+    ref = mi.load_dict({'type': 'roughconductor', 'distribution': 'beckmann',
+                        'alpha': alpha, 'material': 'none'})
+    ctx = mi.BSDFContext()
+    wi = [0.05, 0.0, math.sqrt(1 - 0.05 ** 2)]
+    si = make_si(wi)
+    checked = 0
+    for th in np.linspace(0.0, 1.2 * alpha, 7):
+        for ph in np.linspace(0, 2 * math.pi, 8, endpoint=False):
+            h = np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
+            wo = 2 * np.dot(wi, h) * h - np.array(wi)
+            if wo[2] < 0.9:
+                continue
+            a = to_np(ours.eval(ctx, si, mi.Vector3f(wo)))
+            r = to_np(ref.eval(ctx, si, mi.Vector3f(wo)))
+            assert np.allclose(a, r, rtol=0.03), (th, ph, a, r)
+            checked += 1
+    assert checked > 20
+
+
+# ---------------------------------------------------------------------------
+# Parameters: errors, traverse
+# ---------------------------------------------------------------------------
+
+BAD = [
+    ({'surface': 'banana'}, 'surface'),
+    ({'surface': 'gaussian', 'sigma_um': -1.0}, 'sigma_um'),
+    ({'surface': 'gaussian', 'corr_um': 0.0}, 'corr_um'),
+    ({'surface': 'gaussian', 'sigmaa_um': 0.1}, 'sigmaa_um'),
+    ({'surface': 'fractal', 'hurst': 1.5}, 'hurst'),
+    ({'surface': 'periodic', 'period_um': -2.0}, 'period_um'),
+    ({'surface': 'periodic', 'profile': 'triangle'}, 'profile'),
+    ({'surface': 'gaussian', 'fresnel': 'unobtainium'}, 'fresnel'),
+    ({'surface': 'gaussian', 'fresnel': 0.5, 'eta': 1.2, 'k': 3.0}, 'fresnel'),
+    ({'surface': 'gaussian', 'tracks': 'spiral'}, 'tracks'),
+    ({'surface': 'gaussian', 'center_u': 0.3}, 'center_u'),
+]
+
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'llvm_ad_rgb'])
+@pytest.mark.parametrize('params,name', BAD)
+def test15_bad_parameters_refused_by_name(variant, params, name):
+    use(variant)
+    with pytest.raises(Exception) as e:
+        mi.load_dict(dict({'type': 'diffraction'}, **params))
+    assert 'diffraction' in str(e.value) and name in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'llvm_ad_rgb'])
+def test16_traverse_and_update(variant):
+    use(variant)
+    b = mi.load_dict(bsdf_dict('gaussian', fresnel=0.8))
+    params = mi.traverse(b)
+    for k in ('sigma_um', 'corr_um', 'fresnel', 'twist'):
+        assert k in params
+    assert 'surface' not in params    # strings are not traversable
+    ctx = mi.BSDFContext()
+    si = make_si(WI_LIST[1])
+    wo = mi.Vector3f(-0.2, -0.1, math.sqrt(0.95))
+    v0 = to_np(b.eval(ctx, si, wo))
+    params['fresnel'] = 0.4
+    params.update()
+    v1 = to_np(b.eval(ctx, si, wo))
+    assert np.all(v1 < v0)
+    assert '0.4' in str(b)
+    params['sigma_um'] = 0.2
+    params.update()
+    v2 = to_np(b.eval(ctx, si, wo))
+    assert not np.allclose(v1, v2)
+    params['sigma_um'] = -1.0
+    with pytest.raises(Exception, match='sigma_um'):
+        params.update()
+
+
+# ---------------------------------------------------------------------------
+# Rendering
+# ---------------------------------------------------------------------------
+
+def scene_dict(surface='gaussian', **extra):
+    return {
+        'type': 'scene',
+        'integrator': {'type': 'path', 'max_depth': 3},
+        'sensor': {'type': 'perspective', 'fov': 40,
+                   'to_world': mi.ScalarTransform4f().look_at(origin=[0, -3, 2],
+                                                              target=[0, 0, 0],
+                                                              up=[0, 0, 1]),
+                   'film': {'type': 'hdrfilm', 'width': 24, 'height': 16,
+                            'rfilter': {'type': 'box'}},
+                   'sampler': {'type': 'independent', 'sample_count': 16}},
+        'plane': {'type': 'rectangle', 'bsdf': bsdf_dict(surface, **extra)},
+        'light': {'type': 'point', 'position': [0, 2.5, 2.0],
+                  'intensity': {'type': 'spectrum', 'value': 10.0}},
+        'env': {'type': 'constant', 'radiance': {'type': 'spectrum', 'value': 0.2}},
+    }
+
+
+@pytest.mark.parametrize('variant', ALL_VARIANTS)
+@pytest.mark.parametrize('surface', ['gaussian', 'cd'])
+def test17_small_scene_finite(variant, surface):
+    use(variant)
+    extra = {'tracks': 'concentric'} if surface == 'cd' else {}
+    img = to_np(mi.render(mi.load_dict(scene_dict(surface, **extra)), spp=8))
+    assert np.all(np.isfinite(img))
+    assert img.mean() > 0
+
+
+def test18_symbolic_mode_refused():
+    use('llvm_ad_rgb')
+    scene = mi.load_dict(scene_dict())
+    with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, True), \
+            dr.scoped_set_flag(dr.JitFlag.SymbolicCalls, True):
+        with pytest.raises(Exception) as e:
+            mi.render(scene, spp=4)
+    # mi.render wraps the plugin's exception (drjit.custom): walk the chain
+    msgs, err = [], e.value
+    while err is not None:
+        msgs.append(str(err))
+        err = err.__cause__ or err.__context__
+    assert any('SymbolicLoops' in m and 'diffraction' in m for m in msgs), msgs
+
+
+def test19_scalar_vs_llvm():
+    means = {}
+    for v in ('scalar_rgb', 'llvm_ad_rgb'):
+        use(v)
+        img = to_np(mi.render(mi.load_dict(scene_dict('gaussian')), spp=256, seed=1))
+        means[v] = img.reshape(4, 4, 6, 4, 3).mean(axis=(1, 3))   # 4x6 blocks
+    a, b = means['scalar_rgb'], means['llvm_ad_rgb']
+    assert np.allclose(a.mean(), b.mean(), rtol=0.02)
+    assert np.allclose(a, b, rtol=0.1, atol=0.02 * a.mean())
