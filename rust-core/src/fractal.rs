@@ -20,8 +20,10 @@
 //!   sin(pi j alpha/2) x^-(j alpha + 2) (convergent for alpha < 1, asymptotic
 //!   otherwise).
 //!
-//! The switch points are where 10 (small x) or 20 (large x) terms give
-//! 1e-16 with decreasing terms and no cancellation. Each table point is
+//! The switch points are where 8 (small x) or 12 (large x) terms give
+//! 1e-16 with decreasing terms and little cancellation; at run time each
+//! series is one exp and a Horner polynomial in v = e^(2(y - y_min)) or
+//! u = e^(-alpha (y - y_max)), both <= 1. Each table point is
 //! taken from the best of three sources, each with an error estimate: both
 //! series with many terms (build time only) and the Mellin-Barnes inversion
 //!
@@ -52,15 +54,16 @@ mod math;
 mod tests;
 
 use crate::geometry::PairGeometry;
-use crate::special::fast_exp;
 use build::{hermite, hermite_deriv, ln_cell_mass, log_add};
 use math::{series_coefs, LN_2PI, LN_PI};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Terms of the run-time small-x series.
-const N_SMALL: usize = 10;
+const N_SMALL: usize = 8;
 /// Terms of the run-time large-x series.
-const N_LARGE: usize = 20;
+const N_LARGE: usize = 12;
+/// 1 / (4 pi^2).
+const INV_4PI2: f64 = 1.0 / (4.0 * std::f64::consts::PI * std::f64::consts::PI);
 /// ln(4 pi^2).
 const LN_4PI2: f64 = 2.0 * LN_2PI;
 
@@ -77,8 +80,10 @@ struct ProfileData {
     gaussian: bool,
     /// ln Phi(0) = ln(2 pi Gamma(2/alpha) / alpha).
     ln_phi0: f64,
-    /// Small-x run-time series: term_n / term_0 = (-1)^n exp(small_d[n-1] + 2 n y).
-    small_d: Vec<f64>,
+    /// Small-x run-time series anchored at y0: Phi = Phi(0) (1 + sum_n
+    /// small_c[n-1] v^n), v = exp(2 (y - y0)) <= 1 (signed coefficients,
+    /// |small_c| decreasing by construction of y0).
+    small_c: Vec<f64>,
     /// Grid: y_i = y0 + i h, i < n; [ln Phi, d ln Phi/dy] and [ln cdf, ln ccdf].
     y0: f64,
     h: f64,
@@ -246,7 +251,7 @@ impl StableProfile {
     pub fn memory_bytes(&self) -> usize {
         let d = &*self.inner;
         std::mem::size_of::<ProfileData>()
-            + 8 * (d.small_d.capacity() + d.large_r.capacity())
+            + 8 * (d.small_c.capacity() + d.large_r.capacity())
             + 16 * (d.table.capacity() + d.cdf.capacity())
     }
 
@@ -272,7 +277,7 @@ impl ProfileData {
                 alpha,
                 gaussian: true,
                 ln_phi0,
-                small_d: Vec::new(),
+                small_c: Vec::new(),
                 y0: 0.0,
                 h: 1.0,
                 inv_h: 1.0,
@@ -305,7 +310,16 @@ impl ProfileData {
         let n = tables.ln_phi.len();
         let y0 = tables.y0;
         let y_last = y0 + (n - 1) as f64 * h;
-        let small_d: Vec<f64> = (1..N_SMALL).map(|k| co.small[k] - co.small[0]).collect();
+        let small_c: Vec<f64> = (1..N_SMALL)
+            .map(|n| {
+                let l = co.small[n] - co.small[0] + 2.0 * n as f64 * y0;
+                if n % 2 == 0 {
+                    l.exp()
+                } else {
+                    -l.exp()
+                }
+            })
+            .collect();
         let ln_a1 = co.large[0];
         let large_r: Vec<f64> = (2..=N_LARGE)
             .map(|j| {
@@ -320,7 +334,7 @@ impl ProfileData {
             alpha,
             gaussian: false,
             ln_phi0,
-            small_d,
+            small_c,
             y0,
             h,
             inv_h: 1.0 / h,
@@ -405,44 +419,34 @@ impl ProfileData {
     /// Small-x run-time series, valid for y <= y0.
     #[inline]
     fn small_ln_phi(&self, y: f64) -> f64 {
-        let mut s = 0.0;
-        let mut sign = -1.0;
-        for (k, d) in self.small_d.iter().enumerate() {
-            let e = d + 2.0 * (k + 1) as f64 * y;
-            if e < -40.0 {
-                break;
-            }
-            s += sign * fast_exp(e);
-            sign = -sign;
+        let v = (2.0 * (y - self.y0)).exp();
+        let mut p = 0.0;
+        for c in self.small_c.iter().rev() {
+            p = (p + c) * v;
         }
-        self.ln_phi0 + s.ln_1p()
+        // absolute accuracy in ln Phi is what matters: ln(1 + p) is enough
+        self.ln_phi0 + (1.0 + p).ln()
     }
 
     /// Large-x run-time series, valid for y >= y_last.
     #[inline]
     fn tail_ln_phi(&self, y: f64) -> f64 {
-        let u = fast_exp(-self.alpha * (y - self.y_last));
+        let u = (-self.alpha * (y - self.y_last)).exp();
         let mut p = 0.0;
         for r in self.large_r.iter().rev() {
-            p = p * u + r;
+            p = (p + r) * u;
         }
-        self.ln_a1 - (self.alpha + 2.0) * y + (p * u).ln_1p()
+        self.ln_a1 - (self.alpha + 2.0) * y + (1.0 + p).ln()
     }
 
     /// ln cdf from the small-x series (y <= y0): (1/2pi) sum term_n x^2/(2n+2).
     fn small_ln_cdf(&self, y: f64) -> f64 {
-        let mut s = 0.0;
-        let mut sign = -1.0;
-        for (k, d) in self.small_d.iter().enumerate() {
-            let n = (k + 1) as f64;
-            let e = d + 2.0 * n * y;
-            if e < -40.0 {
-                break;
-            }
-            s += sign * e.exp() / (n + 1.0);
-            sign = -sign;
+        let v = (2.0 * (y - self.y0)).exp();
+        let mut p = 0.0;
+        for (k, c) in self.small_c.iter().enumerate().rev() {
+            p = (p + c / (k + 2) as f64) * v;
         }
-        self.ln_phi0 + 2.0 * y - LN_2PI - std::f64::consts::LN_2 + s.ln_1p()
+        self.ln_phi0 + 2.0 * y - LN_2PI - std::f64::consts::LN_2 + p.ln_1p()
     }
 
     /// ln ccdf from the large-x series (y >= y_last): (1/2pi) sum A_j x^-(j alpha)/(j alpha).
@@ -450,9 +454,9 @@ impl ProfileData {
         let u = (-self.alpha * (y - self.y_last)).exp();
         let mut p = 0.0;
         for (k, r) in self.large_r.iter().enumerate().rev() {
-            p = p * u + r / (k + 2) as f64;
+            p = (p + r / (k + 2) as f64) * u;
         }
-        self.ln_a1 - self.alpha * y - LN_2PI - self.alpha.ln() + (p * u).ln_1p()
+        self.ln_a1 - self.alpha * y - LN_2PI - self.alpha.ln() + p.ln_1p()
     }
 
     fn ln_cdf_pair(&self, y: f64) -> (f64, f64) {
@@ -704,22 +708,28 @@ impl FractalSurface {
         if !(k_per_um > 0.0 && k_per_um < f64::INFINITY) {
             return 0.0;
         }
-        let ln_k = k_per_um.ln();
-        // |w| >= 2 MIN_COS for valid geometry; the clamp only keeps ln finite.
-        let ln_w = geom.w.abs().max(1e-300).ln();
+        // Fast path: 2 ln + 1 exp, the prefactor k^2/w^2 in linear space.
+        let aw = geom.w.abs();
+        let k2 = k_per_um * k_per_um;
+        let kw = k_per_um * aw;
         let r2 = geom.u * geom.u + geom.v * geom.v;
-        let ln_s = -self.inv_alpha * self.ln_a(ln_k, ln_w); // ln a^(-1/alpha)
-        let y = 0.5 * r2.ln() + ln_k + ln_s;
-        let ln_phi = self.profile.ln_phi_at_ln(y);
-        let ln_k_val = 2.0 * (ln_k - ln_w + ln_s) - LN_4PI2 + ln_phi;
-        if ln_k_val > 709.0 {
-            return f64::MAX;
+        let kr2 = k2 * r2;
+        let pref = k2 / (aw * aw);
+        if kw.is_normal() && pref.is_normal() && (kr2.is_normal() || r2 == 0.0) {
+            let ln_s = -self.inv_alpha * (2.0 * kw.ln() + self.ln_a_const);
+            let y = 0.5 * kr2.ln() + ln_s;
+            let e = 2.0 * ln_s + self.profile.ln_phi_at_ln(y);
+            if e > -700.0 && e < 700.0 {
+                return (pref * INV_4PI2 * e.exp()).min(f64::MAX);
+            }
         }
-        let v = fast_exp(ln_k_val);
-        if v.is_nan() {
-            0.0
+        let l = self.ln_kernel(k_per_um, geom);
+        if l > 709.0 {
+            f64::MAX
+        } else if l > -746.0 {
+            l.exp()
         } else {
-            v
+            0.0
         }
     }
 
@@ -730,10 +740,15 @@ impl FractalSurface {
         }
         let ln_k = k_per_um.ln();
         let ln_w = geom.w.abs().max(1e-300).ln();
-        let r2 = geom.u * geom.u + geom.v * geom.v;
+        let ln_r = geom.u.hypot(geom.v).ln();
         let ln_s = -self.inv_alpha * self.ln_a(ln_k, ln_w);
-        let y = 0.5 * r2.ln() + ln_k + ln_s;
-        2.0 * (ln_k - ln_w + ln_s) - LN_4PI2 + self.profile.ln_phi_at_ln(y)
+        let y = ln_r + ln_k + ln_s;
+        let l = 2.0 * (ln_k - ln_w + ln_s) - LN_4PI2 + self.profile.ln_phi_at_ln(y);
+        if l.is_nan() {
+            f64::NEG_INFINITY
+        } else {
+            l
+        }
     }
 
     /// scale = a^(-1/alpha) for this (k, w), a = k^2 w^2 sigma^2 / (2 lag^alpha)

@@ -661,29 +661,41 @@ fn construction_time_memory_and_speed() {
 
 #[test]
 fn micro_timings() {
+    use std::hint::black_box;
     let n = 4_000_000;
     let xs: Vec<f64> = (0..1024)
         .map(|i| 0.5 + (i as f64 * 0.618).fract())
         .collect();
-    let time = |name: &str, f: &dyn Fn(f64) -> f64| {
-        let t = std::time::Instant::now();
-        let mut acc = 0.0;
-        for i in 0..n {
-            acc += f(xs[i & 1023]);
-        }
-        println!(
-            "{name}: {:.1} ns ({acc:.3e})",
-            t.elapsed().as_secs_f64() * 1e9 / n as f64
-        );
-    };
-    time("ln", &|x| x.ln());
-    time("ln_1p", &|x| x.ln_1p());
-    time("fast_exp", &|x| fast_exp(x));
+    macro_rules! time {
+        ($name:expr, $f:expr) => {{
+            let t = std::time::Instant::now();
+            let mut acc = 0.0;
+            for i in 0..n {
+                acc += $f(black_box(xs[i & 1023]));
+            }
+            black_box(acc);
+            println!(
+                "{}: {:.1} ns",
+                $name,
+                t.elapsed().as_secs_f64() * 1e9 / n as f64
+            );
+        }};
+    }
+    time!("empty", |x: f64| x);
+    time!("ln", |x: f64| x.ln());
+    time!("exp", |x: f64| x.exp());
+    time!("ln_1p", |x: f64| x.ln_1p());
+    time!("fast_exp", |x: f64| crate::special::fast_exp(x));
     let p = StableProfile::new(1.4).unwrap();
     let d = p.diagnostics();
-    time("table", &|x| {
-        p.ln_phi_at_ln(d.y_min + x * (d.y_max - d.y_min) * 0.9)
-    });
-    time("small", &|x| p.ln_phi_at_ln(d.y_min - 3.0 * x));
-    time("tail", &|x| p.ln_phi_at_ln(d.y_max + 3.0 * x));
+    time!("table", |x: f64| p.ln_phi_at_ln(
+        d.y_min + (x - 0.5) * (d.y_max - d.y_min) * 0.99
+    ));
+    time!("small", |x: f64| p.ln_phi_at_ln(d.y_min - 3.0 * x));
+    time!("tail", |x: f64| p.ln_phi_at_ln(d.y_max + 3.0 * x));
+    let sf = FractalSurface::new(0.7, 0.1, 2.0).unwrap();
+    let g = geom(0.3, 0.0, 0.5, 2.0);
+    time!("kernel", |x: f64| sf.kernel(8.0 + x, &g));
+    let g = geom(0.3, 0.0, 0.32, 3.0);
+    time!("kernel near specular", |x: f64| sf.kernel(8.0 + x, &g));
 }
