@@ -58,8 +58,7 @@ use std::f64::consts::PI;
 mod tests;
 
 /// The spectrum module the RGB path integrates against.
-#[path = "periodic_spectrum_standin.rs"]
-mod spectrum; // TEMPORARY stand-in until the spectrum branch lands
+use crate::spectrum;
 
 /// Shortest wavelength the tables cover (the visible band's lower end), um.
 const LAMBDA_MIN_UM: f64 = 0.36;
@@ -84,11 +83,11 @@ const RGB_TAIL_EXPONENT: f64 = 40.0;
 /// RGB: half width, in standard deviations, of the part of a peak that the
 /// quadratic fit of the slowly varying factor has to represent.
 const RGB_PEAK_HALF_WIDTH_SIGMAS: f64 = 4.0;
-/// RGB: a peak whose significant part inside the band is wider than this
-/// (1/um of wavenumber) is integrated with the smooth rule instead.
-const RGB_BROAD_WIDTH: f64 = 0.3;
+/// RGB: a peak whose standard deviation in wavenumber exceeds this (1/um) is
+/// integrated with the smooth rule instead of the quadratic fit.
+const RGB_BROAD_SIGMA: f64 = 0.1;
 /// RGB: node count of the smooth rule used for broad peaks.
-const RGB_SMOOTH_NODES: usize = 24;
+const RGB_SMOOTH_NODES: usize = 32;
 
 /// One period of the height profile (lengths in micrometres).
 #[derive(Clone, Debug, PartialEq)]
@@ -451,10 +450,25 @@ impl PeriodicSurface {
     }
 
     /// Linear-sRGB kernel: integral over the visible band of
-    /// reflectance(lambda_nm) K(lambda) W_c(lambda) d lambda, per order
-    /// analytically (Gaussian peak in wavenumber times a quadratic fit of the
-    /// slowly varying rest, against `spectrum::gaussian_moments`), broad
-    /// peaks with `spectrum::smooth_rule`. No fixed wavelength grid.
+    /// reflectance(lambda_nm) K(lambda) W_c(lambda) d lambda. No fixed
+    /// wavelength grid (no banding). In wavenumber nu, order n's factor is
+    /// exp(-A_n) exp(-(nu - mu_n)^2 / (2 s^2)) with rho^2 = u^2 + v^2,
+    /// mu_n = u n / (Lam rho^2), s = 1 / (2 sqrt 2 pi l rho) and
+    /// A_n = 4 pi^2 l^2 n^2 v^2 / (Lam^2 rho^2). Per order:
+    /// - skipped if its exponent exceeds 40 everywhere in the band;
+    /// - s <= 0.1 /um: the rest S_n = R nu^2 |c_n(2 pi nu w)|^2 (times
+    ///   4 pi l^2 / w^2) is fitted by a quadratic through 3 evaluations
+    ///   (Gauss-Hermite nodes mu +- sqrt 3 s, moved inside the significant
+    ///   in-band part of the peak when it is cut by the band edge) and
+    ///   integrated against the Gaussian moments of W_c (`peak_moments`);
+    /// - s > 0.1 /um (order 0 near the mirror direction, short l): the whole
+    ///   term goes through the 32-node `spectrum::smooth_rule`.
+    ///
+    /// Measured (tests): max channel error / max channel below 3.1e-3 against
+    /// fine-grid references for the compact disc (l = 3.75..5000 um), a sine
+    /// and a tabulated grating, flat and gold-like reflectance. Channels can
+    /// be negative (sRGB matching functions have negative lobes); the result
+    /// is always finite.
     pub fn kernel_rgb(&self, geom: &PairGeometry, reflectance: &dyn Fn(f64) -> f64) -> [f64; 3] {
         let mut out = [0.0; 3];
         let (u, v, w) = (geom.u, geom.v, geom.w);
@@ -512,7 +526,7 @@ impl PeriodicSurface {
             } else {
                 ((mu - reach).max(nu_lo), (mu + reach).min(nu_hi))
             };
-            if !(b - a <= RGB_BROAD_WIDTH) {
+            if !(s <= RGB_BROAD_SIGMA) {
                 if n_broad < broad.len() {
                     broad[n_broad] = n;
                     n_broad += 1;
@@ -539,7 +553,7 @@ impl PeriodicSurface {
             let a0 = s0 - d1 * e + d2 * e * e;
             let a1 = d1 - 2.0 * d2 * e;
             let a2 = d2;
-            let m = spectrum::gaussian_moments(mu, s);
+            let m = peak_moments(mu, s, nu_lo, nu_hi);
             let scale = c_const * (-a_n).exp();
             for (ch, o) in out.iter_mut().enumerate() {
                 *o += scale * (a0 * m[0][ch] + a1 * m[1][ch] + a2 * m[2][ch]);
@@ -588,6 +602,35 @@ impl PeriodicSurface {
         }
         out
     }
+}
+
+/// Gaussian moments of the sRGB weight for one peak. Peaks narrower than a
+/// quarter of a 1 nm cell of the weight table (in wavenumber, mu^2 / 1000)
+/// and inside the band use the 3-point Gauss-Hermite rule (nodes mu and
+/// mu +- sqrt(3) s) on the weight itself: exact for a weight that is a
+/// quintic across the peak, and off by at most ~0.11 s |slope jump| where
+/// the piecewise-linear weight has a kink under the peak (below 2e-3 of M0
+/// for D65's 1 nm structure at this width). This avoids the per-cell erf
+/// integration of `spectrum::gaussian_moments` (several hundred ns) for the
+/// many narrow peaks of long coherence lengths. Everything else goes to
+/// `spectrum::gaussian_moments`.
+fn peak_moments(mu: f64, s: f64, nu_lo: f64, nu_hi: f64) -> [[f64; 3]; 3] {
+    let narrow = s <= 0.25e-3 * mu * mu && mu - 8.0 * s > nu_lo && mu + 8.0 * s < nu_hi;
+    if !narrow {
+        return spectrum::gaussian_moments(mu, s);
+    }
+    let r = 3.0f64.sqrt() * s;
+    let w0 = spectrum::srgb_weight_per_wavenumber(mu);
+    let wp = spectrum::srgb_weight_per_wavenumber(mu + r);
+    let wm = spectrum::srgb_weight_per_wavenumber(mu - r);
+    let norm = (2.0 * PI).sqrt() * s;
+    let mut m = [[0.0; 3]; 3];
+    for c in 0..3 {
+        m[0][c] = norm * (2.0 / 3.0 * w0[c] + (wp[c] + wm[c]) / 6.0);
+        m[1][c] = norm * r / 6.0 * (wp[c] - wm[c]);
+        m[2][c] = norm * s * s * 0.5 * (wp[c] + wm[c]);
+    }
+    m
 }
 
 /// Orders n whose peak can touch the band [nu_lo, nu_hi] (in wavenumber) for
