@@ -21,6 +21,9 @@ pub const FLAG_HAS_COHERENT: u32 = 1;
 pub const FLAG_ANISOTROPIC: u32 = 2;
 pub const FLAG_SPECTRALLY_VARYING: u32 = 4;
 
+/// Largest node count of the RGB rule (params::range::RGB_NODES).
+const MAX_RGB_NODES: usize = crate::params::range::RGB_NODES.1;
+
 /// Largest roughness exponent g for which the coherent lobe is evaluated:
 /// beyond it e^-g < 1e-300, nothing a renderer can see.
 const COHERENT_MAX_G: f64 = 690.0;
@@ -36,7 +39,84 @@ pub struct Brdf {
     pub surface: Surface,
     pub fresnel: Fresnel,
     /// Wavelength rule of the RGB path for spectrally smooth surfaces.
-    rgb_rule: &'static SmoothRule,
+    rgb_rule: RgbRule,
+}
+
+/// Cosine bins of the Fresnel-weighted RGB rule.
+const FRESNEL_COS_BINS: usize = 256;
+
+/// The RGB path for kernels smooth in wavelength (Gaussian, fractal, the
+/// coherent lobe): f_c = sum_j K(nu_j) w_jc(cos). A metal's Fresnel spectrum
+/// is not smooth enough to interpolate from a dozen nodes, so it is folded
+/// into the weights instead: w_jc(cos) integrates the rule's basis against
+/// F^2(cos, lambda) W_c(lambda) on the 1 nm grid, tabulated over the cosine
+/// and interpolated linearly. Wavelength-independent Fresnel keeps the plain
+/// weights (no table).
+struct RgbRule {
+    rule: &'static SmoothRule,
+    k_per_um: Vec<f64>,
+    ln_k_per_um: Vec<f64>,
+    /// (FRESNEL_COS_BINS + 1) rows of one weight triple per node; empty when
+    /// the Fresnel term does not depend on wavelength.
+    fresnel_weights: Vec<[f64; 3]>,
+}
+
+impl RgbRule {
+    fn new(node_count: usize, fresnel: &Fresnel) -> RgbRule {
+        let rule = spectrum::smooth_rule(node_count);
+        let fresnel_weights = if fresnel.is_spectrally_flat() {
+            Vec::new()
+        } else {
+            (0..=FRESNEL_COS_BINS)
+                .flat_map(|b| {
+                    let cos = b as f64 / FRESNEL_COS_BINS as f64;
+                    rule.weights_with_factor(|lambda| fresnel.reflectance(cos, lambda))
+                })
+                .collect()
+        };
+        let k_per_um: Vec<f64> = rule.nu_per_um.iter().map(|nu| 2.0 * PI * nu).collect();
+        RgbRule {
+            ln_k_per_um: k_per_um.iter().map(|k| k.ln()).collect(),
+            k_per_um,
+            rule,
+            fresnel_weights,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.k_per_um.len()
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.k_per_um.len() * 8 + self.fresnel_weights.len() * 24
+    }
+
+    /// sum_j values[j] F^2(cos, lambda_j) w_jc, with F^2 folded as above.
+    #[inline]
+    fn integrate(&self, fresnel: &Fresnel, cos: f64, values: &[f64]) -> [f64; 3] {
+        let n = self.len();
+        let mut acc = [0.0; 3];
+        if self.fresnel_weights.is_empty() {
+            let r = fresnel.reflectance(cos, 550.0);
+            for (v, w) in values.iter().zip(&self.rule.weights) {
+                acc[0] += v * w[0];
+                acc[1] += v * w[1];
+                acc[2] += v * w[2];
+            }
+            return acc.map(|a| a * r);
+        }
+        let t = cos.clamp(0.0, 1.0) * FRESNEL_COS_BINS as f64;
+        let b = (t as usize).min(FRESNEL_COS_BINS - 1);
+        let frac = t - b as f64;
+        let row0 = &self.fresnel_weights[b * n..(b + 1) * n];
+        let row1 = &self.fresnel_weights[(b + 1) * n..(b + 2) * n];
+        for ((v, w0), w1) in values.iter().zip(row0).zip(row1) {
+            for c in 0..3 {
+                acc[c] += v * (w0[c] + frac * (w1[c] - w0[c]));
+            }
+        }
+        acc
+    }
 }
 
 /// Wavenumber k = 2 pi / lambda in 1/um.
@@ -78,10 +158,7 @@ impl Brdf {
                 } else {
                     GaussianSurface::isotropic(*sigma_um, *corr_x_um)
                 };
-                s.series = SeriesSettings {
-                    tolerance: params.accuracy.series_tolerance,
-                    ..SeriesSettings::default()
-                };
+                s.series = SeriesSettings::with_tolerance(params.accuracy.series_tolerance);
                 Surface::Gaussian(s)
             }
             SurfaceParams::Fractal {
@@ -100,7 +177,22 @@ impl Brdf {
                     .map_err(StamError::new)?,
             ),
         };
-        let rgb_rule = spectrum::smooth_rule(params.accuracy.rgb_nodes);
+        // Periodic surfaces integrate their orders against the matching
+        // functions themselves and never use the smooth rule.
+        let node_count = match surface {
+            Surface::Periodic(_) => 0,
+            _ => params.accuracy.rgb_nodes,
+        };
+        let rgb_rule = if node_count == 0 {
+            RgbRule {
+                rule: spectrum::smooth_rule(1),
+                k_per_um: Vec::new(),
+                ln_k_per_um: Vec::new(),
+                fresnel_weights: Vec::new(),
+            }
+        } else {
+            RgbRule::new(node_count, &params.fresnel)
+        };
         Ok(Brdf {
             fresnel: params.fresnel.clone(),
             params,
@@ -126,6 +218,7 @@ impl Brdf {
 
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Brdf>()
+            + self.rgb_rule.memory_bytes()
             + match &self.surface {
                 Surface::Gaussian(_) => 0,
                 Surface::Fractal(f) => f.memory_bytes(),
@@ -170,18 +263,18 @@ impl Brdf {
                 s.kernel_rgb(&geom, &reflectance)
             }
             _ => {
-                let rule = self.rgb_rule;
-                let mut acc = [0.0; 3];
-                for j in 0..rule.nu_per_um.len() {
-                    let k = 2.0 * PI * rule.nu_per_um[j];
-                    let value = self.fresnel.reflectance(geom.cos_half, rule.lambda_nm[j])
-                        * self.kernel(k, &geom);
-                    let w = &rule.weights[j];
-                    acc[0] += w[0] * value;
-                    acc[1] += w[1] * value;
-                    acc[2] += w[2] * value;
+                let mut values = [0.0; MAX_RGB_NODES];
+                let values = &mut values[..self.rgb_rule.len()];
+                let rule = &self.rgb_rule;
+                if let Surface::Gaussian(s) = &self.surface {
+                    s.kernel_at_wavenumbers(&rule.k_per_um, &rule.ln_k_per_um, &geom, values);
+                } else {
+                    for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
+                        *v = self.kernel(k, &geom);
+                    }
                 }
-                acc
+                self.rgb_rule
+                    .integrate(&self.fresnel, geom.cos_half, values)
             }
         };
         rgb.map(|c| finite_non_negative(c * geom.geometric_factor))
@@ -221,26 +314,19 @@ impl Brdf {
         let Some(cos_i) = incidence_cosine(wi) else {
             return [0.0; 3];
         };
-        let rule = self.rgb_rule;
-        // Skip the integration when the lobe is gone at the shortest wavelength
-        // that matters (the bluest rule node has the largest g).
-        let k_max = 2.0 * PI * rule.nu_per_um.iter().cloned().fold(0.0, f64::max);
-        if s.roughness_exponent(k_max, 2.0 * cos_i) > COHERENT_MAX_G
-            && s.roughness_exponent(wavenumber_per_um(LAMBDA_MAX_NM), 2.0 * cos_i) > COHERENT_MAX_G
-        {
+        // Skip the integration when the lobe is gone even at the red end of
+        // the band (g grows with k).
+        if s.roughness_exponent(wavenumber_per_um(LAMBDA_MAX_NM), 2.0 * cos_i) > COHERENT_MAX_G {
             return [0.0; 3];
         }
-        let mut acc = [0.0; 3];
-        for j in 0..rule.nu_per_um.len() {
-            let k = 2.0 * PI * rule.nu_per_um[j];
-            let value = self.fresnel.reflectance(cos_i, rule.lambda_nm[j])
-                * s.coherent_attenuation(k, cos_i);
-            let w = &rule.weights[j];
-            acc[0] += w[0] * value;
-            acc[1] += w[1] * value;
-            acc[2] += w[2] * value;
+        let mut values = [0.0; MAX_RGB_NODES];
+        let values = &mut values[..self.rgb_rule.len()];
+        for (v, &k) in values.iter_mut().zip(&self.rgb_rule.k_per_um) {
+            *v = s.coherent_attenuation(k, cos_i);
         }
-        acc.map(finite_non_negative)
+        self.rgb_rule
+            .integrate(&self.fresnel, cos_i, values)
+            .map(finite_non_negative)
     }
 }
 
@@ -251,5 +337,97 @@ fn incidence_cosine(wi: DVec3) -> Option<f64> {
         Some(wi.z)
     } else {
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn directions() -> Vec<(DVec3, DVec3)> {
+        let mut out = Vec::new();
+        for &(ti, phi_i) in &[(0.05, 0.0), (0.5, 0.3), (1.1, 1.0), (1.45, 2.0)] {
+            let wi = DVec3::new(f64::sin(ti) * f64::cos(phi_i), f64::sin(ti) * f64::sin(phi_i), f64::cos(ti));
+            for &(to, dphi) in &[(0.0, 0.0), (0.1, 0.2), (0.3, 0.5), (0.6, 2.5), (1.2, 3.0)] {
+                // Around the mirror direction of wi.
+                let m = DVec3::new(-wi.x, -wi.y, wi.z);
+                let tilt = DVec3::new(f64::sin(to) * f64::cos(dphi), f64::sin(to) * f64::sin(dphi), 0.0);
+                let wo = (m + tilt).normalize();
+                if wo.z > 0.01 {
+                    out.push((wi, wo));
+                }
+            }
+        }
+        out
+    }
+
+    /// The RGB path against the 1 nm reference integration of the spectral
+    /// path, for the spectrally smooth models and each Fresnel kind. The
+    /// error is relative to the largest channel.
+    #[test]
+    fn rgb_matches_1nm_reference_for_smooth_models() {
+        let materials = [
+            r#"{"surface":"gaussian","sigma_um":0.03,"corr_um":2.0,"fresnel":"gold"}"#,
+            r#"{"surface":"gaussian","sigma_um":0.12,"corr_um":3.0,"fresnel":"copper"}"#,
+            r#"{"surface":"gaussian","sigma_um":0.5,"corr_um":4.0}"#,
+            r#"{"surface":"gaussian","sigma_um":2.0,"corr_um":10.0,"fresnel":{"eta":1.5,"k":0}}"#,
+            r#"{"surface":"gaussian","sigma_um":0.1,"corr_x_um":1.0,"corr_y_um":12.0,"fresnel":"silver"}"#,
+            r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.1,"lag_um":1.0,"fresnel":"gold"}"#,
+            r#"{"surface":"fractal","hurst":0.3,"sigma_um":0.05,"lag_um":2.0,"fresnel":0.8}"#,
+        ];
+        let mut worst: f64 = 0.0;
+        for json in materials {
+            let brdf = Brdf::from_json(json).unwrap();
+            for (wi, wo) in directions() {
+                let fast = brdf.eval_rgb(wi, wo);
+                // Saturated spectral colours fall outside the sRGB gamut; the
+                // outputs are clamped at 0 and so is the reference.
+                let reference = brdf.eval_rgb_reference(wi, wo, 1.0).map(|c| c.max(0.0));
+                let scale = reference.iter().cloned().fold(0.0, f64::max);
+                if scale < 1e-12 {
+                    continue;
+                }
+                for c in 0..3 {
+                    let e = (fast[c] - reference[c]).abs() / scale;
+                    if e > worst {
+                        worst = e;
+                    }
+                    assert!(e < 5e-3, "{json} wi {wi:?} wo {wo:?}: {fast:?} vs {reference:?}");
+                }
+            }
+        }
+        println!("RGB vs 1 nm reference, smooth models: worst error {worst:.2e} of the largest channel");
+    }
+
+    #[test]
+    fn flat_spectrum_maps_to_equal_rgb() {
+        // Fresnel constant and a kernel with no wavelength dependence: the
+        // H = 1 fractal is the geometric-optics (Beckmann) limit.
+        let brdf =
+            Brdf::from_json(r#"{"surface":"fractal","hurst":1.0,"sigma_um":0.2,"lag_um":1.0,"fresnel":0.5}"#)
+                .unwrap();
+        let wi = DVec3::new(0.3, 0.1, 0.9).normalize();
+        let wo = DVec3::new(-0.25, -0.05, 0.95).normalize();
+        let spectral = brdf.eval_spectral(wi, wo, 550.0);
+        let rgb = brdf.eval_rgb(wi, wo);
+        for c in rgb {
+            assert!((c - spectral).abs() < 1e-6 * spectral, "{rgb:?} vs {spectral}");
+        }
+    }
+
+    #[test]
+    fn coherent_rgb_matches_reference() {
+        let brdf = Brdf::from_json(r#"{"surface":"gaussian","sigma_um":0.06,"corr_um":2.0,"fresnel":"gold"}"#)
+            .unwrap();
+        for &ct in &[1.0, 0.7, 0.3, 0.05] {
+            let wi = DVec3::new((1.0f64 - ct * ct).sqrt(), 0.0, ct);
+            let fast = brdf.coherent_rgb(wi);
+            let reference = spectrum::integrate_rgb_reference(|l| brdf.coherent_spectral(wi, l), 1.0)
+                .map(|c| c.max(0.0));
+            let scale = reference.iter().cloned().fold(0.0, f64::max);
+            for c in 0..3 {
+                assert!((fast[c] - reference[c]).abs() < 2e-3 * scale, "{fast:?} vs {reference:?}");
+            }
+        }
     }
 }

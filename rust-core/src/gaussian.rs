@@ -34,16 +34,31 @@ pub const DEFAULT_ASYMPTOTIC_MIN_G: f64 = 30.0;
 pub struct SeriesSettings {
     pub tolerance: f64,
     pub asymptotic_min_g: f64,
+    /// Serve S(g, x) from the universal table where it covers (g, x); only
+    /// when `tolerance` is no tighter than the table's own accuracy.
+    pub use_table: bool,
 }
 
 impl Default for SeriesSettings {
     fn default() -> Self {
+        SeriesSettings::with_tolerance(DEFAULT_SERIES_TOLERANCE)
+    }
+}
+
+impl SeriesSettings {
+    pub fn with_tolerance(tolerance: f64) -> SeriesSettings {
         SeriesSettings {
-            tolerance: DEFAULT_SERIES_TOLERANCE,
+            tolerance,
             asymptotic_min_g: DEFAULT_ASYMPTOTIC_MIN_G,
+            use_table: tolerance >= TABLE_MIN_TOLERANCE,
         }
     }
 }
+
+/// Tightest series tolerance served by the table (its bicubic interpolation
+/// error is below 4e-5 relative, measured in the tests); a tighter setting
+/// sums the series exactly.
+pub const TABLE_MIN_TOLERANCE: f64 = 1e-5;
 
 /// A Gaussian-correlated height field: C(x, y) = sigma^2 exp(-x^2/Tx^2 - y^2/Ty^2).
 #[derive(Clone, Debug, PartialEq)]
@@ -107,6 +122,36 @@ impl GaussianSurface {
         prefactor * s
     }
 
+    /// K at several wavenumbers (the RGB rule's nodes), sharing the
+    /// geometry work: g and x scale as k^2, so ln g and sqrt(x) (the table's
+    /// coordinates) are offsets and scalings of per-pair values.
+    pub fn kernel_at_wavenumbers(
+        &self,
+        k_per_um: &[f64],
+        ln_k_per_um: &[f64],
+        geom: &PairGeometry,
+        out: &mut [f64],
+    ) {
+        let g0 = self.roughness_exponent(1.0, geom.w);
+        let x0 = self.lobe_exponent(1.0, geom.u, geom.v);
+        let ln_g0 = g0.ln();
+        let root_x0 = x0.sqrt();
+        let prefactor0 = self.corr_x_um * self.corr_y_um / (4.0 * PI * geom.w * geom.w);
+        for ((o, &k), &ln_k) in out.iter_mut().zip(k_per_um).zip(ln_k_per_um) {
+            let k2 = k * k;
+            let g = g0 * k2;
+            let x = x0 * k2;
+            let s = if self.series.use_table && g < self.series.asymptotic_min_g {
+                series_table()
+                    .lookup_parts(g, ln_g0 + 2.0 * ln_k, root_x0 * k)
+                    .unwrap_or_else(|| poisson_series(g, x, &self.series))
+            } else {
+                poisson_series(g, x, &self.series)
+            };
+            *o = prefactor0 * k2 * s;
+        }
+    }
+
     /// Fraction e^-g of the energy left in the mirror lobe at incidence
     /// cosine cos_i (w = -2 cos_i there).
     pub fn coherent_attenuation(&self, k_per_um: f64, cos_i: f64) -> f64 {
@@ -127,7 +172,97 @@ pub fn poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
             return s;
         }
     }
+    if settings.use_table {
+        if let Some(s) = series_table().lookup(g, x) {
+            return s;
+        }
+    }
     poisson_series_exact(g, x, settings.tolerance)
+}
+
+/// ln S tabulated over (ln g, sqrt x): one universal function of two
+/// variables, so one table serves every Gaussian material. In sqrt(x) the far
+/// tail ln S ~ -2 sqrt(x ln(m/g)) is nearly linear, and near x = 0 ln S is
+/// even in sqrt(x): both interpolate well with Catmull-Rom bicubics.
+struct SeriesTable {
+    ln_g_min: f64,
+    inv_d_ln_g: f64,
+    n_g: usize,
+    inv_d_root_x: f64,
+    n_root_x: usize,
+    ln_s: Vec<f64>,
+}
+
+const TABLE_G_MIN: f64 = 1e-4;
+const TABLE_G_MAX: f64 = 40.0;
+const TABLE_D_LN_G: f64 = 0.08;
+const TABLE_ROOT_X_MAX: f64 = 60.0;
+const TABLE_D_ROOT_X: f64 = 0.05;
+
+fn series_table() -> &'static SeriesTable {
+    static TABLE: std::sync::OnceLock<SeriesTable> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let ln_g_min = TABLE_G_MIN.ln();
+        // One node of margin on each side for the bicubic stencil.
+        let n_g = ((TABLE_G_MAX.ln() - ln_g_min) / TABLE_D_LN_G).ceil() as usize + 3;
+        let n_root_x = (TABLE_ROOT_X_MAX / TABLE_D_ROOT_X).ceil() as usize + 3;
+        let mut ln_s = Vec::with_capacity(n_g * n_root_x);
+        for i in 0..n_g {
+            let g = (ln_g_min + (i as f64 - 1.0) * TABLE_D_LN_G).exp();
+            for j in 0..n_root_x {
+                let r = (j as f64 - 1.0).abs() * TABLE_D_ROOT_X;
+                ln_s.push(poisson_series_exact(g, r * r, 1e-13).max(1e-300).ln());
+            }
+        }
+        SeriesTable {
+            ln_g_min,
+            inv_d_ln_g: 1.0 / TABLE_D_LN_G,
+            n_g,
+            inv_d_root_x: 1.0 / TABLE_D_ROOT_X,
+            n_root_x,
+            ln_s,
+        }
+    })
+}
+
+#[inline(always)]
+fn catmull_rom(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+impl SeriesTable {
+    /// None outside the tabulated (g, x) range.
+    #[inline]
+    fn lookup(&self, g: f64, x: f64) -> Option<f64> {
+        self.lookup_parts(g, g.ln(), x.sqrt())
+    }
+
+    /// The same from g, ln g and sqrt(x) when the caller has them.
+    #[inline]
+    fn lookup_parts(&self, g: f64, ln_g: f64, root_x: f64) -> Option<f64> {
+        if !(TABLE_G_MIN..TABLE_G_MAX).contains(&g) || !(root_x < TABLE_ROOT_X_MAX) {
+            return None;
+        }
+        let fg = (ln_g - self.ln_g_min) * self.inv_d_ln_g + 1.0;
+        let fx = root_x * self.inv_d_root_x + 1.0;
+        let ig = (fg as usize).clamp(1, self.n_g - 3);
+        let ix = (fx as usize).clamp(1, self.n_root_x - 3);
+        let wg = catmull_rom(fg - ig as f64);
+        let wx = catmull_rom(fx - ix as f64);
+        let mut acc = 0.0;
+        for (a, wa) in wg.iter().enumerate() {
+            let row = &self.ln_s[(ig - 1 + a) * self.n_root_x + ix - 1..][..4];
+            acc += wa * (wx[0] * row[0] + wx[1] * row[1] + wx[2] * row[2] + wx[3] * row[3]);
+        }
+        Some(fast_exp(acc))
+    }
 }
 
 /// phi(m) = exp(-x/m)/m.

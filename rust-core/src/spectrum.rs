@@ -262,6 +262,10 @@ pub struct SmoothRule {
     pub lambda_nm: Vec<f64>,
     /// Weights per node and linear sRGB channel.
     pub weights: Vec<[f64; 3]>,
+    /// trap_i * L_j(nu_i) on the 1 nm grid (row i, column j): the rule's
+    /// interpolation basis, kept so that weights against other measures
+    /// (W_c times a known spectral factor) come out of the same basis.
+    basis_nm: Vec<f64>,
 }
 
 impl SmoothRule {
@@ -282,6 +286,24 @@ impl SmoothRule {
             add_scaled(&mut acc, f_of_nu(nu), w);
         }
         acc
+    }
+
+    /// Weights of the same interpolation basis against W_c(lambda) *
+    /// factor(lambda), for integrands factor * g with only g smooth: the
+    /// factor (a metal's Fresnel spectrum, say) is integrated on the 1 nm
+    /// grid rather than interpolated.
+    pub fn weights_with_factor(&self, factor: impl Fn(f64) -> f64) -> Vec<[f64; 3]> {
+        let n = self.nu_per_um.len();
+        let t = colour_tables();
+        let mut weights = vec![[0.0; 3]; n];
+        for (i, w) in t.w_nm.iter().enumerate() {
+            let f = factor(LAMBDA_MIN_NM + i as f64);
+            let row = &self.basis_nm[i * n..(i + 1) * n];
+            for (wj, &bj) in weights.iter_mut().zip(row) {
+                add_scaled(wj, f * bj, w);
+            }
+        }
+        weights
     }
 }
 
@@ -367,6 +389,7 @@ fn build_rule(n: usize, kind: RuleKind) -> SmoothRule {
         _ => None,
     };
     let bary = barycentric_weights(&xs);
+    let mut basis_nm = Vec::with_capacity(N * n);
     for (i, w) in t.w_nm.iter().enumerate() {
         let trap = if i == 0 || i == N - 1 { 0.5 } else { 1.0 };
         let x = (1000.0 / (LAMBDA_MIN_NM + i as f64) - mid) / half;
@@ -377,11 +400,13 @@ fn build_rule(n: usize, kind: RuleKind) -> SmoothRule {
         for (wj, &bj) in weights.iter_mut().zip(&basis) {
             add_scaled(wj, trap * bj, w);
         }
+        basis_nm.extend(basis.iter().map(|&b| trap * b));
     }
     SmoothRule {
         lambda_nm: nu.iter().map(|&v| 1000.0 / v).collect(),
         nu_per_um: nu,
         weights,
+        basis_nm,
     }
 }
 
