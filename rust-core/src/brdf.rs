@@ -23,7 +23,7 @@ pub const FLAG_SPECTRALLY_VARYING: u32 = 4;
 
 /// Largest roughness exponent g for which the coherent lobe is evaluated:
 /// beyond it e^-g < 1e-300, nothing a renderer can see.
-const COHERENT_MAX_G: f64 = 690.0;
+pub(crate) const COHERENT_MAX_G: f64 = 690.0;
 
 pub enum Surface {
     Gaussian(GaussianSurface),
@@ -46,7 +46,7 @@ pub fn wavenumber_per_um(lambda_nm: f64) -> f64 {
 }
 
 #[inline]
-fn in_band(lambda_nm: f64) -> bool {
+pub(crate) fn in_band(lambda_nm: f64) -> bool {
     (LAMBDA_MIN_NM..=LAMBDA_MAX_NM).contains(&lambda_nm)
 }
 
