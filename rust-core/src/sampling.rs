@@ -291,11 +291,10 @@ enum Lobe {
         ax: f64,
         ay: f64,
     },
-    /// Radially symmetric (u, v) density c^2 Phi(c r) / (4 pi^2).
+    /// Fractal: radially symmetric (u, v) density c^2 Phi(c r) / (4 pi^2),
+    /// ln c = ln k + ln(projected scale at the mirror).
     Radial {
-        c: f64,
-        phi: fn(&Brdf, f64) -> f64,
-        inverse_cdf: fn(&Brdf, f64) -> f64,
+        ln_c: f64,
     },
     Orders(OrdersLobe),
     Rainbow(RainbowLobe),
@@ -307,9 +306,15 @@ impl Lobe {
             Lobe::Series(s) => s.sample(t, r1, r2),
             Lobe::Orders(o) => o.sample(t, r1, r2),
             Lobe::Rainbow(r) => r.sample(t, r1, r2),
-            Lobe::Radial { c, inverse_cdf, .. } => {
-                let rho = inverse_cdf(brdf, r1);
-                let r = rho / c;
+            Lobe::Radial { ln_c } => {
+                let Surface::Fractal(f) = &brdf.surface else {
+                    return None;
+                };
+                let ln_r = f.profile.inverse_radial_cdf_ln(r1) - ln_c;
+                let r = ln_r.exp();
+                if !(r < 2.0) {
+                    return None;
+                }
                 let angle = 2.0 * PI * r2;
                 (r * angle.cos(), r * angle.sin())
             }
@@ -335,9 +340,17 @@ impl Lobe {
             Lobe::Series(s) => s.pdf_uv(u, v),
             Lobe::Orders(o) => o.pdf_uv(u, v),
             Lobe::Rainbow(r) => r.pdf_uv(u, v),
-            Lobe::Radial { c, phi, .. } => {
-                let r = (u * u + v * v).sqrt();
-                c * c * phi(brdf, c * r) / (4.0 * PI * PI)
+            Lobe::Radial { ln_c } => {
+                let Surface::Fractal(f) = &brdf.surface else {
+                    return 0.0;
+                };
+                let ln_r = (u * u + v * v).sqrt().ln();
+                let ln_p = 2.0 * ln_c + f.profile.ln_phi_at_ln(ln_r + ln_c) - (4.0 * PI * PI).ln();
+                if ln_p < 709.0 {
+                    ln_p.exp()
+                } else {
+                    f64::MAX
+                }
             }
             Lobe::Beckmann { ax, ay } => {
                 let sum = wi + wo;
@@ -553,7 +566,23 @@ impl Brdf {
                 };
                 Component::new(p_coh, rest, lobe)
             }
-            Surface::Fractal(_) => Component::cosine_only(),
+            Surface::Fractal(f) => {
+                let ln_c = k.ln() + f.ln_projected_scale(k, 2.0 * wi.z);
+                if !ln_c.is_finite() {
+                    return Component::cosine_only();
+                }
+                // Share of the lobe inside |(u, v)| < 1 (always above the
+                // horizon for normal incidence): a very wide lobe loses most
+                // samples below the horizon, so it gets fewer of them.
+                let inside = f.profile.radial_cdf(ln_c.exp().min(f64::MAX));
+                let p_lobe = (1.0 - DEFENSIVE_FRACTION) * inside.clamp(0.0, 1.0);
+                Component {
+                    p_coh: 0.0,
+                    p_def: 1.0 - p_lobe,
+                    p_lobe,
+                    lobe: Some(Lobe::Radial { ln_c }),
+                }
+            }
             Surface::Periodic(p) => grating_component(
                 self,
                 wi,
@@ -1365,7 +1394,17 @@ mod tests {
     fn sample_pdf_consistency_and_sanity() {
         let mut rng = Rng(42);
         let mut checked = 0;
-        for json in [SMOOTH, MEDIUM, ROUGH, ANISO, CD_SHORT, SINE, CD] {
+        for json in [
+            SMOOTH,
+            MEDIUM,
+            ROUGH,
+            ANISO,
+            CD_SHORT,
+            SINE,
+            CD,
+            FRACTAL,
+            FRACTAL_ROUGH,
+        ] {
             let brdf = material(json);
             for _ in 0..300 {
                 let cos_t = 0.02 + 0.98 * rng.next();
@@ -1400,6 +1439,28 @@ mod tests {
     }
 
     const CD: &str = r#"{"surface":"cd","fresnel":0.9}"#;
+    /// Fractal surfaces: H = 0.7 (alpha 1.4) and a rougher, heavier-tailed
+    /// H = 0.35.
+    const FRACTAL: &str =
+        r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.05,"lag_um":1,"fresnel":0.9}"#;
+    const FRACTAL_ROUGH: &str =
+        r#"{"surface":"fractal","hurst":0.35,"sigma_um":0.2,"lag_um":1,"fresnel":0.9}"#;
+
+    #[test]
+    fn chi2_fractal() {
+        run_fits(
+            "fractal",
+            &material(FRACTAL),
+            &[Some(530.0), None],
+            CHI2_SAMPLES,
+        );
+        run_fits(
+            "fractal H.35",
+            &material(FRACTAL_ROUGH),
+            &[Some(430.0), None],
+            CHI2_SAMPLES,
+        );
+    }
 
     /// pdf > 0 wherever f > 0 (random pairs, spectral and RGB).
     #[test]
@@ -1412,7 +1473,16 @@ mod tests {
             DVec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
         };
         let mut positive = 0;
-        for json in [SMOOTH, MEDIUM, ROUGH, ANISO, CD, SINE] {
+        for json in [
+            SMOOTH,
+            MEDIUM,
+            ROUGH,
+            ANISO,
+            CD,
+            SINE,
+            FRACTAL,
+            FRACTAL_ROUGH,
+        ] {
             let brdf = material(json);
             for _ in 0..400 {
                 let (wi, wo) = (dir(&mut rng), dir(&mut rng));
@@ -1437,7 +1507,7 @@ mod tests {
     #[test]
     fn degenerate_inputs_stay_finite() {
         let nan = f64::NAN;
-        for json in [SMOOTH, ROUGH, CD] {
+        for json in [SMOOTH, ROUGH, CD, FRACTAL] {
             let brdf = material(json);
             let wis = [
                 DVec3::new(nan, 0.0, 1.0),
@@ -1522,7 +1592,7 @@ mod tests {
         use crate::ffi::*;
         use std::ffi::CString;
         let mut rng = Rng(3);
-        for json in [SMOOTH, ROUGH, ANISO, CD] {
+        for json in [SMOOTH, ROUGH, ANISO, CD, FRACTAL] {
             let text = CString::new(json).unwrap();
             let b = unsafe { stam_brdf_new(text.as_ptr(), std::ptr::null_mut(), 0) };
             assert!(!b.is_null());
