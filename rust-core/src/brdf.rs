@@ -26,7 +26,7 @@ const MAX_RGB_NODES: usize = crate::params::range::RGB_NODES.1;
 
 /// Largest roughness exponent g for which the coherent lobe is evaluated:
 /// beyond it e^-g < 1e-300, nothing a renderer can see.
-const COHERENT_MAX_G: f64 = 690.0;
+pub(crate) const COHERENT_MAX_G: f64 = 690.0;
 
 pub enum Surface {
     Gaussian(GaussianSurface),
@@ -126,7 +126,7 @@ pub fn wavenumber_per_um(lambda_nm: f64) -> f64 {
 }
 
 #[inline]
-fn in_band(lambda_nm: f64) -> bool {
+pub(crate) fn in_band(lambda_nm: f64) -> bool {
     (LAMBDA_MIN_NM..=LAMBDA_MAX_NM).contains(&lambda_nm)
 }
 

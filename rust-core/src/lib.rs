@@ -18,6 +18,7 @@ pub mod gaussian;
 pub mod geometry;
 pub mod params;
 pub mod periodic;
+pub mod sampling;
 pub mod special;
 pub mod spectrum;
 
