@@ -23,18 +23,18 @@ pub struct Budget {
 
 pub const FULL: Budget = Budget {
     extent: 16.0,
-    point_realisations: 6e7,
-    min_realisations: 32,
-    max_realisations: 4000,
+    point_realisations: 1.5e8,
+    min_realisations: 48,
+    max_realisations: 10000,
     calib_realisations: 32,
     fbm_per_rc: 16.0,
 };
 
 pub const CI: Budget = Budget {
     extent: 12.0,
-    point_realisations: 6e6,
-    min_realisations: 24,
-    max_realisations: 600,
+    point_realisations: 2.5e7,
+    min_realisations: 64,
+    max_realisations: 1000,
     calib_realisations: 16,
     fbm_per_rc: 12.0,
 };
@@ -115,7 +115,7 @@ pub fn fbm_case(
     let n = (((extent / dx) / 16.0).ceil() as usize * 16).max(256);
     let grid = Grid { nx: n, ny: n, dx };
     let d = dq(&grid);
-    let q_max = 0.25 * grid.q_nyquist();
+    let q_max = (0.25 * grid.q_nyquist()).min(1.0 / (crate::random::FBM_FIT_RANGE.0 * rc));
     RandomCase {
         name: format!("fbm H={hurst} s/l={s_over_lambda} th={theta_i_deg}"),
         model: RandomModel::Fbm { hurst, s, lag },

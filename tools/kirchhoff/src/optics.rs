@@ -36,7 +36,8 @@ pub const LAMBDA_BAND_NM: (f64, f64) = (370.0, 820.0);
 /// t = 1/k = -2 (q . wi_xy + a wi_z) / (|q|^2 + a^2).
 pub fn solve_pair(wi: DVec3, a: f64, qx: f64, qy: f64) -> Option<Pair> {
     let t = -2.0 * (qx * wi.x + qy * wi.y + a * wi.z) / (qx * qx + qy * qy + a * a);
-    if !(t > 0.0) {
+    // (also rejects NaN)
+    if t.is_nan() || t <= 0.0 {
         return None;
     }
     let wo = DVec3::new(-qx * t - wi.x, -qy * t - wi.y, -a * t - wi.z);
