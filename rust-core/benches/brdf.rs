@@ -12,12 +12,27 @@ use std::hint::black_box;
 
 /// The materials benchmarked: (name, JSON). Names are the table's rows.
 pub const MATERIALS: [(&str, &str); 6] = [
-    ("gaussian_smooth", r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":3.0}"#),
-    ("gaussian_rough", r#"{"surface":"gaussian","sigma_um":0.6,"corr_um":4.0}"#),
-    ("anisotropic", r#"{"surface":"gaussian","sigma_um":0.15,"corr_x_um":1.0,"corr_y_um":15.0}"#),
-    ("fractal", r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.1,"lag_um":1.0}"#),
+    (
+        "gaussian_smooth",
+        r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":3.0}"#,
+    ),
+    (
+        "gaussian_rough",
+        r#"{"surface":"gaussian","sigma_um":0.6,"corr_um":4.0}"#,
+    ),
+    (
+        "anisotropic",
+        r#"{"surface":"gaussian","sigma_um":0.15,"corr_x_um":1.0,"corr_y_um":15.0}"#,
+    ),
+    (
+        "fractal",
+        r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.1,"lag_um":1.0}"#,
+    ),
     ("cd", r#"{"surface":"cd"}"#),
-    ("sine_grating", r#"{"surface":"periodic","period_um":1.6,"coherence_um":20,"profile":"sine","height_um":0.25}"#),
+    (
+        "sine_grating",
+        r#"{"surface":"periodic","period_um":1.6,"coherence_um":20,"profile":"sine","height_um":0.25}"#,
+    ),
 ];
 
 const BATCH: usize = 1024;
@@ -27,7 +42,9 @@ const BATCH: usize = 1024;
 fn directions(seed: u64) -> Vec<(DVec3, DVec3, f64)> {
     let mut state = seed;
     let mut next = move || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((state >> 11) as f64) / ((1u64 << 53) as f64)
     };
     (0..BATCH)

@@ -5,13 +5,21 @@ use std::f64::consts::PI;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let json = args.get(1).map(String::as_str).unwrap_or(r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":3.0}"#);
+    let json = args
+        .get(1)
+        .map(String::as_str)
+        .unwrap_or(r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":3.0}"#);
     let mode = args.get(2).map(String::as_str).unwrap_or("spectral");
-    let count: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1_000_000);
+    let count: usize = args
+        .get(3)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1_000_000);
     let brdf = stam::Brdf::from_json(json).expect("material");
     let mut state = 1u64;
     let mut next = move || {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((state >> 11) as f64) / ((1u64 << 53) as f64)
     };
     let start = std::time::Instant::now();
@@ -26,7 +34,11 @@ fn main() {
         let st = (1.0 - ct * ct).sqrt();
         let wo = DVec3::new(st * phi.cos(), st * phi.sin(), ct);
         let lambda = 380.0 + 400.0 * next();
-        acc += if mode == "rgb" { brdf.eval_rgb(wi, wo)[1] } else { brdf.eval_spectral(wi, wo, lambda) };
+        acc += if mode == "rgb" {
+            brdf.eval_rgb(wi, wo)[1]
+        } else {
+            brdf.eval_spectral(wi, wo, lambda)
+        };
     }
     let ns = start.elapsed().as_nanos() as f64 / count as f64;
     println!("{mode}: {ns:.1} ns per evaluation (checksum {acc:.6e})");

@@ -26,7 +26,7 @@ const MAX_RGB_NODES: usize = crate::params::range::RGB_NODES.1;
 
 /// Largest roughness exponent g for which the coherent lobe is evaluated:
 /// beyond it e^-g < 1e-300, nothing a renderer can see.
-const COHERENT_MAX_G: f64 = 690.0;
+pub(crate) const COHERENT_MAX_G: f64 = 690.0;
 
 pub enum Surface {
     Gaussian(GaussianSurface),
@@ -126,7 +126,7 @@ pub fn wavenumber_per_um(lambda_nm: f64) -> f64 {
 }
 
 #[inline]
-fn in_band(lambda_nm: f64) -> bool {
+pub(crate) fn in_band(lambda_nm: f64) -> bool {
     (LAMBDA_MIN_NM..=LAMBDA_MAX_NM).contains(&lambda_nm)
 }
 
@@ -347,11 +347,19 @@ mod tests {
     fn directions() -> Vec<(DVec3, DVec3)> {
         let mut out = Vec::new();
         for &(ti, phi_i) in &[(0.05, 0.0), (0.5, 0.3), (1.1, 1.0), (1.45, 2.0)] {
-            let wi = DVec3::new(f64::sin(ti) * f64::cos(phi_i), f64::sin(ti) * f64::sin(phi_i), f64::cos(ti));
+            let wi = DVec3::new(
+                f64::sin(ti) * f64::cos(phi_i),
+                f64::sin(ti) * f64::sin(phi_i),
+                f64::cos(ti),
+            );
             for &(to, dphi) in &[(0.0, 0.0), (0.1, 0.2), (0.3, 0.5), (0.6, 2.5), (1.2, 3.0)] {
                 // Around the mirror direction of wi.
                 let m = DVec3::new(-wi.x, -wi.y, wi.z);
-                let tilt = DVec3::new(f64::sin(to) * f64::cos(dphi), f64::sin(to) * f64::sin(dphi), 0.0);
+                let tilt = DVec3::new(
+                    f64::sin(to) * f64::cos(dphi),
+                    f64::sin(to) * f64::sin(dphi),
+                    0.0,
+                );
                 let wo = (m + tilt).normalize();
                 if wo.z > 0.01 {
                     out.push((wi, wo));
@@ -392,41 +400,56 @@ mod tests {
                     if e > worst {
                         worst = e;
                     }
-                    assert!(e < 5e-3, "{json} wi {wi:?} wo {wo:?}: {fast:?} vs {reference:?}");
+                    assert!(
+                        e < 5e-3,
+                        "{json} wi {wi:?} wo {wo:?}: {fast:?} vs {reference:?}"
+                    );
                 }
             }
         }
-        println!("RGB vs 1 nm reference, smooth models: worst error {worst:.2e} of the largest channel");
+        println!(
+            "RGB vs 1 nm reference, smooth models: worst error {worst:.2e} of the largest channel"
+        );
     }
 
     #[test]
     fn flat_spectrum_maps_to_equal_rgb() {
         // Fresnel constant and a kernel with no wavelength dependence: the
         // H = 1 fractal is the geometric-optics (Beckmann) limit.
-        let brdf =
-            Brdf::from_json(r#"{"surface":"fractal","hurst":1.0,"sigma_um":0.2,"lag_um":1.0,"fresnel":0.5}"#)
-                .unwrap();
+        let brdf = Brdf::from_json(
+            r#"{"surface":"fractal","hurst":1.0,"sigma_um":0.2,"lag_um":1.0,"fresnel":0.5}"#,
+        )
+        .unwrap();
         let wi = DVec3::new(0.3, 0.1, 0.9).normalize();
         let wo = DVec3::new(-0.25, -0.05, 0.95).normalize();
         let spectral = brdf.eval_spectral(wi, wo, 550.0);
         let rgb = brdf.eval_rgb(wi, wo);
         for c in rgb {
-            assert!((c - spectral).abs() < 1e-6 * spectral, "{rgb:?} vs {spectral}");
+            assert!(
+                (c - spectral).abs() < 1e-6 * spectral,
+                "{rgb:?} vs {spectral}"
+            );
         }
     }
 
     #[test]
     fn coherent_rgb_matches_reference() {
-        let brdf = Brdf::from_json(r#"{"surface":"gaussian","sigma_um":0.06,"corr_um":2.0,"fresnel":"gold"}"#)
-            .unwrap();
+        let brdf = Brdf::from_json(
+            r#"{"surface":"gaussian","sigma_um":0.06,"corr_um":2.0,"fresnel":"gold"}"#,
+        )
+        .unwrap();
         for &ct in &[1.0, 0.7, 0.3, 0.05] {
             let wi = DVec3::new((1.0f64 - ct * ct).sqrt(), 0.0, ct);
             let fast = brdf.coherent_rgb(wi);
-            let reference = spectrum::integrate_rgb_reference(|l| brdf.coherent_spectral(wi, l), 1.0)
-                .map(|c| c.max(0.0));
+            let reference =
+                spectrum::integrate_rgb_reference(|l| brdf.coherent_spectral(wi, l), 1.0)
+                    .map(|c| c.max(0.0));
             let scale = reference.iter().cloned().fold(0.0, f64::max);
             for c in 0..3 {
-                assert!((fast[c] - reference[c]).abs() < 2e-3 * scale, "{fast:?} vs {reference:?}");
+                assert!(
+                    (fast[c] - reference[c]).abs() < 2e-3 * scale,
+                    "{fast:?} vs {reference:?}"
+                );
             }
         }
     }

@@ -199,6 +199,113 @@ pub unsafe extern "C" fn stam_brdf_coherent_rgb(
     });
 }
 
+#[inline]
+unsafe fn optional_lambda(lambda_nm: *const f32, i: usize) -> Option<f64> {
+    if lambda_nm.is_null() {
+        None
+    } else {
+        Some(*lambda_nm.add(i) as f64)
+    }
+}
+
+/// # Safety
+/// wi, rnd and wo hold 3n floats, pdf n floats, coherent n bytes (or NULL);
+/// lambda_nm NULL (RGB mode) or n floats; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_sample(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    lambda_nm: *const f32,
+    rnd: *const f32,
+    wo: *mut f32,
+    pdf: *mut f32,
+    coherent: *mut u8,
+) {
+    if n == 0 {
+        return;
+    }
+    let zero = |wo: *mut f32, pdf: *mut f32, coherent: *mut u8| {
+        if !wo.is_null() {
+            std::slice::from_raw_parts_mut(wo, 3 * n).fill(0.0);
+        }
+        if !pdf.is_null() {
+            std::slice::from_raw_parts_mut(pdf, n).fill(0.0);
+        }
+        if !coherent.is_null() {
+            std::slice::from_raw_parts_mut(coherent, n).fill(0);
+        }
+    };
+    if b.is_null() || wi.is_null() || rnd.is_null() || wo.is_null() || pdf.is_null() {
+        zero(wo, pdf, coherent);
+        return;
+    }
+    let brdf = &(*b).brdf;
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        for i in 0..n {
+            let sampler = brdf.sampler(direction(wi, i), optional_lambda(lambda_nm, i));
+            let r = std::slice::from_raw_parts(rnd.add(3 * i), 3);
+            let s = sampler.sample([r[0] as f64, r[1] as f64, r[2] as f64]);
+            let out = [s.wo.x as f32, s.wo.y as f32, s.wo.z as f32];
+            // The pdf of the direction as the caller sees it (rounded to f32),
+            // so that stam_brdf_pdf at the returned wo gives the same value.
+            let p = if s.pdf > 0.0 && !s.coherent {
+                sampler.pdf(DVec3::new(out[0] as f64, out[1] as f64, out[2] as f64))
+            } else {
+                s.pdf
+            };
+            std::slice::from_raw_parts_mut(wo.add(3 * i), 3).copy_from_slice(&out);
+            *pdf.add(i) = to_output(p);
+            if !coherent.is_null() {
+                *coherent.add(i) = u8::from(s.coherent && p > 0.0);
+            }
+        }
+    }));
+    if result.is_err() {
+        zero(wo, pdf, coherent);
+    }
+}
+
+/// # Safety
+/// wi and wo hold 3n floats, pdf n; lambda_nm NULL (RGB mode) or n floats;
+/// `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_pdf(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    wo: *const f32,
+    lambda_nm: *const f32,
+    pdf: *mut f32,
+) {
+    let ok = !wi.is_null() && !wo.is_null();
+    batch(b, n, pdf, 1, ok, |brdf, i, o| {
+        let p = brdf.pdf(
+            direction(wi, i),
+            direction(wo, i),
+            optional_lambda(lambda_nm, i),
+        );
+        o[0] = to_output(p);
+    });
+}
+
+/// # Safety
+/// wi holds 3n floats, out n; lambda_nm NULL (RGB mode) or n floats; `b`
+/// NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_coherent_probability(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    lambda_nm: *const f32,
+    out: *mut f32,
+) {
+    batch(b, n, out, 1, !wi.is_null(), |brdf, i, o| {
+        let p = brdf.coherent_probability(direction(wi, i), optional_lambda(lambda_nm, i));
+        o[0] = to_output(p);
+    });
+}
+
 /// # Safety
 /// `b` NULL or valid.
 #[no_mangle]

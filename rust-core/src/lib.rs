@@ -5,6 +5,10 @@
 //! specular lobe, Fresnel, colour by wavelength integration and the C ABI
 //! that the Mitsuba plugin calls. See `docs/physics.md` for the formulas.
 
+// `!(x > 0.0)` is how this crate rejects NaN along with the out-of-range
+// values; the negated comparisons are deliberate.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod brdf;
 pub mod error;
 pub mod ffi;
@@ -14,6 +18,7 @@ pub mod gaussian;
 pub mod geometry;
 pub mod params;
 pub mod periodic;
+pub mod sampling;
 pub mod special;
 pub mod spectrum;
 

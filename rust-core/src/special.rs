@@ -13,7 +13,7 @@ pub fn fast_exp(x: f64) -> f64 {
         return f64::INFINITY;
     }
     const LOG2_E: f64 = std::f64::consts::LOG2_E;
-    const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
     const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     let n = (x * LOG2_E).round();
     let r = (x - n * LN2_HI) - n * LN2_LO;

@@ -20,9 +20,15 @@ fn material() -> impl Strategy<Value = String> {
     ];
     let gaussian = (log_uniform(1e-5, 50.0), log_uniform(0.01, 1e4))
         .prop_map(|(s, t)| format!("\"surface\":\"gaussian\",\"sigma_um\":{s},\"corr_um\":{t}"));
-    let anisotropic = (log_uniform(1e-5, 50.0), log_uniform(0.01, 1e4), log_uniform(0.01, 1e4))
+    let anisotropic = (
+        log_uniform(1e-5, 50.0),
+        log_uniform(0.01, 1e4),
+        log_uniform(0.01, 1e4),
+    )
         .prop_map(|(s, tx, ty)| {
-            format!("\"surface\":\"gaussian\",\"sigma_um\":{s},\"corr_x_um\":{tx},\"corr_y_um\":{ty}")
+            format!(
+                "\"surface\":\"gaussian\",\"sigma_um\":{s},\"corr_x_um\":{tx},\"corr_y_um\":{ty}"
+            )
         });
     let fractal = (
         prop_oneof![Just(0.01f64), Just(0.999), Just(1.0), 0.02f64..1.0],
@@ -42,7 +48,10 @@ fn material() -> impl Strategy<Value = String> {
             };
             format!("\"surface\":\"periodic\",\"period_um\":{period},\"coherence_um\":{coherence},{profile}")
         });
-    (prop_oneof![gaussian, anisotropic, fractal, periodic], fresnel)
+    (
+        prop_oneof![gaussian, anisotropic, fractal, periodic],
+        fresnel,
+    )
         .prop_map(|(surface, fresnel)| format!("{{{surface},\"fresnel\":{fresnel}}}"))
 }
 

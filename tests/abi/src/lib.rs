@@ -6,7 +6,15 @@
 //! The C caller (c/caller.c) then exercises every function through the
 //! header.
 
-#[allow(non_camel_case_types, non_upper_case_globals, dead_code, clippy::all)]
+// The handle is opaque to C (only pointers cross), so its Rust layout is
+// irrelevant; the lint cannot know that.
+#[allow(
+    non_camel_case_types,
+    non_upper_case_globals,
+    dead_code,
+    improper_ctypes,
+    clippy::all
+)]
 pub mod c_header {
     include!(concat!(env!("OUT_DIR"), "/stam_header.rs"));
 }
@@ -14,8 +22,11 @@ pub mod c_header {
 use std::ffi::{c_char, c_int, CString};
 
 extern "C" {
-    fn stam_c_caller_run(params_json: *const c_char, report: *mut c_char, report_len: usize)
-        -> c_int;
+    fn stam_c_caller_run(
+        params_json: *const c_char,
+        report: *mut c_char,
+        report_len: usize,
+    ) -> c_int;
 }
 
 /// Runs the C caller on a material; Err carries the failed check's message.
