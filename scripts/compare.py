@@ -420,7 +420,9 @@ def check_slices(model, out_dir=OUT_DIR, pictures=True):
         return np.stack([ca * w[:, 0] + sa * w[:, 1], -sa * w[:, 0] + ca * w[:, 1],
                          w[:, 2]], axis=1)
 
-    planes = [(0.0, 0.0), (30.0, 0.0), (60.0, 0.0), (30.0, 90.0), (60.0, 90.0)]
+    # Incidence planes along the core's x (periodic direction) and y axes
+    tw = cfg.get('twist_deg', 0.0)
+    planes = [(0.0, tw), (30.0, tw), (60.0, tw), (30.0, tw + 90.0), (60.0, tw + 90.0)]
     lams = (450.0, 550.0, 650.0)
     worst = 0.0
     curves = []
@@ -488,6 +490,23 @@ def check_slices(model, out_dir=OUT_DIR, pictures=True):
             'limit': SLICE_LIMIT, 'ok': ok}
 
 
+def diagnose_core_rgb(model, size=48, subpixels=2):
+    """Information, not a pass/fail check: the Rust-only image with the core's
+    RGB path (eval_rgb) against the same image with the spectral BRDF projected
+    on linear sRGB (eval_rgb_reference, 2 nm), i.e. what separates an RGB render
+    from a spectral one before any Mitsuba is involved."""
+    cfg = config(model, size, size, subpixels, 'rgb')
+    rgb, cov, _ = render_rust(cfg)
+    cie, _, _ = render_rust(dict(cfg, mode={'cie_step_nm': 2.0}))
+    mask = interior_mask(cov)
+    m = image_metrics(rgb, cie, mask)
+    sums = [float(rgb[mask][:, c].sum() / cie[mask][:, c].sum() - 1.0)
+            if cie[mask][:, c].sum() != 0 else float('nan') for c in range(3)]
+    neg = float((cie[mask] < 0).mean())
+    return {'model': model, 'rel_rmse': m['rel_rmse'], 'channel_sum_err': sums,
+            'negative_fraction': neg}
+
+
 # ---------------------------------------------------------------------------
 # Report
 # ---------------------------------------------------------------------------
@@ -503,42 +522,71 @@ def report_markdown(results, args, total_s):
              'Relative RMSE = RMS(Mitsuba - Rust) / RMS(Rust) over interior pixels (edge pixels',
              'of the sample excluded); worst = largest per-pixel difference / reference peak.',
              '', '## Images', '',
-             '| model | check | variant | size | spp | rel. RMSE | worst | Mitsuba s | Rust s '
-             '| pass (<= 1 %) |',
-             '|---|---|---|---|---|---|---|---|---|---|']
+             '| model | check | variant | size | spp | rel. RMSE | MC noise | systematic '
+             '| worst | Mitsuba s | Rust s | pass (<= 1 %) |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for r in results:
         if r['check'] in ('rgb', 'spectral', 'bands'):
-            lines.append('| %s | %s | %s | %d | %d | %.3g %% | %.3g %% | %.1f | %.1f | %s |' % (
-                r['model'], r['check'], r['variant'], r['size'], r['spp'],
-                100 * r['rel_rmse'], 100 * r['worst'], r['t_mitsuba'], r['t_rust'],
-                'yes' if r['ok'] else '**NO**'))
+            nz = ('%.3g %%' % (100 * r['noise'])) if 'noise' in r else '-'
+            bs = ('%.3g %%' % (100 * r['bias'])) if 'bias' in r else '-'
+            lines.append('| %s | %s | %s | %d | %d | %.3g %% | %s | %s | %.3g %% | %.1f | %.1f '
+                         '| %s |' % (
+                             r['model'], r['check'], r['variant'], r['size'], r['spp'],
+                             100 * r['rel_rmse'], nz, bs, 100 * r['worst'], r['t_mitsuba'],
+                             r['t_rust'], 'yes' if r['ok'] else '**NO**'))
     lines += ['', 'Checks: `rgb` = scalar_rgb vs the core\'s `eval_rgb`; `spectral` = '
               'scalar_spectral (D65 light, RGB film)',
               'vs the spectral BRDF integrated against D65 and the CIE 1931 functions '
               '(`eval_rgb_reference`);',
               '`bands` = scalar_spectral with a `specfilm` of four 2-nm bands (%s nm) under a '
-              'flat light vs `eval_spectral`.' % ', '.join('%g' % b for b in BANDS_NM), '']
+              'flat light vs `eval_spectral` (trapezoid over each band).' % ', '.join(
+                  '%g' % b for b in BANDS_NM),
+              'Mitsuba samples wavelengths by Monte Carlo (4 per path): for `spectral` and '
+              '`bands`, a second render with another seed measures that noise, and the gate '
+              'is on the systematic part, sqrt(max(0, MSE(mean of 2, Rust) - MSE(1 vs 2) / 4)) '
+              '/ RMS(Rust). Where the noise is large (narrow grating peaks: cd, periodic) the '
+              'systematic estimate resolves only errors comparable to the noise; the `bands` '
+              'rows are the sharper per-wavelength test there.', '']
     for r in results:
         if r['check'] == 'spectral_vs_rgb':
             lines += ['## Compact disc: scalar_spectral vs scalar_rgb (white light)', '',
-                      'Relative L1 error over lit pixels (sum |S - R| / sum R): **%.3g %%** '
-                      '(limit 3 %%; %d lit pixels, %dx%d, %d spp); per-channel sums '
-                      'differ by %s. Render times: rgb %.1f s, spectral %.1f s.' % (
-                          100 * r['rel_l1'], r['lit_pixels'], r['size'], r['size'],
-                          r['spp'], ', '.join('%+.2f %%' % (100 * x)
-                                               for x in r['channel_sum_err']),
+                      'Lit pixels: interior, luminance of the RGB render above 1 %% of its '
+                      'maximum (%d pixels, %dx%d, %d spp). Gate: the mean over lit pixels '
+                      'of each channel, spectral vs RGB, within 3 %%: %s -> **%s**. '
+                      'Per-pixel relative L1 (sum |S - R| / sum R, includes the spectral '
+                      'render\'s wavelength noise): %.3g %%. Render times: rgb %.1f s, '
+                      'spectral %.1f s.' % (
+                          r['lit_pixels'], r['size'], r['size'], r['spp'],
+                          ', '.join('%+.2f %%' % (100 * x) for x in r['channel_sum_err']),
+                          'pass' if r['ok'] else 'FAIL', 100 * r['rel_l1'],
                           r['t_rgb'], r['t_spectral']), '']
     sl = [r for r in results if r['check'] == 'slices']
     if sl:
         lines += ['## BRDF slices', '',
                   'Mitsuba `bsdf.eval / cos(theta_o)` (scalar_rgb; scalar_spectral at 450, '
                   '550, 650 nm) vs the core through ctypes, along the incidence planes '
-                  'phi = 0 (theta_i = 0, 30, 60) and phi = 90 (theta_i = 30, 60); '
+                  'along the core\'s x axis (theta_i = 0, 30, 60) and y axis (theta_i = 30, 60), i.e. '
+                  'phi = twist and twist + 90; '
                   'plots `out/compare/slices_<model>.png`.', '',
                   '| model | max relative difference | pass (<= 1e-3) |', '|---|---|---|']
         for r in sl:
             lines.append('| %s | %.2g | %s |' % (r['model'], r['max_rel_diff'],
                                                  'yes' if r['ok'] else '**NO**'))
+        lines.append('')
+    diag = [r for r in results if r.get('check') == 'core_rgb_vs_cie']
+    if diag:
+        lines += ['## Diagnosis (information): core RGB path vs spectral projection', '',
+                  'Rust-only images, `eval_rgb` vs `eval_rgb_reference` (signed projection of '
+                  'the spectrum on linear sRGB, 2 nm); 48x48, 4 spp. The core clamps each '
+                  'evaluation to non-negative RGB; a near-monochromatic diffraction peak '
+                  'projects to out-of-gamut (partly negative) sRGB, so clamping adds light.', '',
+                  '| model | rel. RMSE | channel sums (R, G, B) | reference values < 0 |',
+                  '|---|---|---|---|']
+        for r in diag:
+            lines.append('| %s | %.3g %% | %s | %.1f %% |' % (
+                r['model'], 100 * r['rel_rmse'],
+                ', '.join('%+.1f %%' % (100 * x) for x in r['channel_sum_err']),
+                100 * r['negative_fraction']))
         lines.append('')
     lines += ['Total time %.0f s (`%s`).' % (total_s, ' '.join(args)), '']
     return '\n'.join(lines)
@@ -599,6 +647,13 @@ def main(argv=None):
             show(check_slices(m, args.out))
     if 'cd' in models:
         show(check_cd_spectral_vs_rgb(args.spectral_size, args.spectral_subpixels, args.out))
+    for m in models:
+        d = diagnose_core_rgb(m)
+        d['check'] = 'core_rgb_vs_cie'
+        results.append(d)
+        print('[compare] %-15s %-16s (information) rel. RMSE %.3g %%, channel sums %s' % (
+            m, 'core rgb vs cie', 100 * d['rel_rmse'],
+            ', '.join('%+.1f %%' % (100 * x) for x in d['channel_sum_err'])), flush=True)
 
     total = time.time() - t0
     md = report_markdown(results, ['scripts/compare.py'] + (argv or sys.argv[1:]), total)
@@ -608,9 +663,9 @@ def main(argv=None):
     if args.write_docs:
         with open(os.path.join(ROOT, 'docs', 'compare.md'), 'w') as f:
             f.write(md)
-    failed = [r for r in results if not r['ok']]
+    failed = [r for r in results if 'ok' in r and not r['ok']]
     print('[compare] %d checks, %d failed, %.0f s; report: %s' % (
-        len(results), len(failed), total, os.path.join(args.out, 'report.md')))
+        len([r for r in results if 'ok' in r]), len(failed), total, os.path.join(args.out, 'report.md')))
     return 1 if failed else 0
 
 
