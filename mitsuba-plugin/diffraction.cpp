@@ -103,10 +103,10 @@ Components: 0 = the diffracted (glossy) lobe; 1 = the coherent mirror lobe
 surfaces).
 
 In spectral variants the BSDF is evaluated at the path's wavelengths. A
-direction is sampled with the first wavelength; since Mitsuba's wavelengths
-are stratified with a random offset, that is a uniformly chosen member of the
-set, so the returned density is the mean of the core's pdf over all
-wavelengths (the multi-wavelength mixture).
+direction is sampled with one of them (the hero), chosen uniformly by the
+first sample, so the returned density, the mean of the core's pdf over all
+the path's wavelengths, is exactly the strategy's density (the unbiased
+multi-wavelength mixture).
 
 LLVM variants need evaluated mode: ``dr.set_flag(dr.JitFlag.SymbolicLoops,
 False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
@@ -272,12 +272,21 @@ void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b) {
     }
 
     if (b.want_sample) {
-        // Sample with the first wavelength of each lane (NULL = RGB mixture)
+        // Spectral: a "hero" wavelength picked uniformly among the lane's nw
+        // wavelengths by the first uniform (rescaled for the core's own lobe
+        // choice), so the strategy's density is exactly the average of the
+        // per-wavelength densities whatever wavelengths Mitsuba assigned.
+        // RGB: NULL = the core's mixture over the visible band.
         std::vector<float> lam0;
-        if (ch == Channels::Spectral) {
+        if (ch == Channels::Spectral && nw > 0) {
             lam0.resize(n);
-            for (size_t i = 0; i < n; ++i)
-                lam0[i] = b.lam[i * nw];
+            for (size_t i = 0; i < n; ++i) {
+                float &r0 = b.rnd[3 * i];
+                float scaled = r0 * (float) nw;
+                size_t hero = std::min((size_t) scaled, nw - 1);
+                r0 = std::min(scaled - (float) hero, 0.99999994f);
+                lam0[i] = b.lam[i * nw + hero];
+            }
         }
         std::vector<float> wo(3 * n, 0.f), pdf0(n, 0.f);
         std::vector<uint8_t> coh(n, 0);

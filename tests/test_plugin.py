@@ -48,6 +48,22 @@ SURFACES = {
     'cd': {'surface': 'cd'},
 }
 
+# Mitsuba's chi-square test integrates the pdf on a fixed 101 x 202 grid, so
+# the plugin-level tests use lobes several cells wide; the core's own
+# chi-square tests (rust-core/src/sampling.rs, adaptive cells) cover the
+# narrow ones, the default compact disc included.
+CHI2_SURFACES = {
+    'gaussian': {'surface': 'gaussian', 'sigma_um': 0.15, 'corr_um': 0.8},
+    'gaussian_aniso': {'surface': 'gaussian', 'sigma_um': 0.15,
+                       'corr_x_um': 0.5, 'corr_y_um': 1.5},
+    'fractal': {'surface': 'fractal', 'sigma_um': 0.1, 'hurst': 0.8, 'lag_um': 0.5},
+    'periodic_rect': {'surface': 'periodic', 'period_um': 1.0, 'profile': 'rect',
+                      'height_um': 0.15, 'width_um': 0.4, 'coherence_um': 1.5},
+    'periodic_sine': {'surface': 'periodic', 'period_um': 1.0, 'profile': 'sine',
+                      'height_um': 0.2, 'coherence_um': 1.5},
+    'cd': {'surface': 'cd', 'period_um': 1.0, 'width_um': 0.2, 'coherence_um': 1.5},
+}
+
 WI_LIST = [[0.0, 0.0, 1.0],
            [0.3, 0.2, math.sqrt(1 - 0.13)],
            [math.sqrt(1 - 0.05 ** 2), 0.0, 0.05]]   # grazing
@@ -226,7 +242,7 @@ def glossy_ctx():
 @pytest.mark.parametrize('wi', WI_LIST)
 def test07_chi2_rgb(surface, wi):
     use('llvm_ad_rgb')
-    extra = bsdf_dict(surface)
+    extra = {'type': 'diffraction', **CHI2_SURFACES[surface]}
     sample_func, pdf_func = mi.chi2.BSDFAdapter('diffraction', extra, wi=wi,
                                                 ctx=glossy_ctx())
     chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(),
@@ -240,7 +256,7 @@ def test07_chi2_rgb(surface, wi):
 def test08_chi2_spectral(surface, wi):
     """Sampling with the first wavelength, pdf = mean over the four wavelengths."""
     use('llvm_ad_spectral')
-    b = mi.load_dict(bsdf_dict(surface))
+    b = mi.load_dict({'type': 'diffraction', **CHI2_SURFACES[surface]})
     sample_func, pdf_func = spectral_adapter(b, wi, glossy_ctx(),
                                              (450.0, 520.0, 590.0, 660.0))
     chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(),
@@ -282,7 +298,9 @@ def test09_sample_weight_and_pdf(variant, surface):
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 def test10_sample_weight_and_pdf_vectorized(variant):
     use(variant)
-    b = mi.load_dict(bsdf_dict('gaussian'))
+    # Rough enough that the coherent lobe (excluded by the glossy context)
+    # leaves a fair share of samples even at grazing incidence.
+    b = mi.load_dict(bsdf_dict('gaussian_rough'))
     ctx = glossy_ctx()
     n = 2000
     rng = np.random.default_rng(4)
@@ -293,7 +311,7 @@ def test10_sample_weight_and_pdf_vectorized(variant):
         v, p = b.eval_pdf(ctx, si, bs.wo)
         w, v, p, bp = to_np(w), to_np(v), to_np(p), to_np(bs.pdf)
         ok = np.any(w > 0, axis=0)
-        assert ok.sum() > n // 4
+        assert ok.sum() > n // 10
         assert np.allclose(bp[ok], p[ok], rtol=1e-3)
         assert np.allclose((w * bp)[:, ok], v[:, ok], rtol=1e-3, atol=1e-6)
 
@@ -445,18 +463,22 @@ def test14_beckmann_limit():
 # Parameters: errors, traverse
 # ---------------------------------------------------------------------------
 
+# Each entry is valid but for the named key, so the refusal must name it.
+_G = {'surface': 'gaussian', 'sigma_um': 0.1, 'corr_um': 2.0}
+_P = {'surface': 'periodic', 'period_um': 2.0, 'coherence_um': 10.0,
+      'profile': 'sine', 'height_um': 0.2}
 BAD = [
     ({'surface': 'banana'}, 'surface'),
-    ({'surface': 'gaussian', 'sigma_um': -1.0}, 'sigma_um'),
-    ({'surface': 'gaussian', 'corr_um': 0.0}, 'corr_um'),
-    ({'surface': 'gaussian', 'sigmaa_um': 0.1}, 'sigmaa_um'),
-    ({'surface': 'fractal', 'hurst': 1.5}, 'hurst'),
-    ({'surface': 'periodic', 'period_um': -2.0}, 'period_um'),
-    ({'surface': 'periodic', 'profile': 'triangle'}, 'profile'),
-    ({'surface': 'gaussian', 'fresnel': 'unobtainium'}, 'fresnel'),
-    ({'surface': 'gaussian', 'fresnel': 0.5, 'eta': 1.2, 'k': 3.0}, 'fresnel'),
-    ({'surface': 'gaussian', 'tracks': 'spiral'}, 'tracks'),
-    ({'surface': 'gaussian', 'center_u': 0.3}, 'center_u'),
+    ({**_G, 'sigma_um': -1.0}, 'sigma_um'),
+    ({**_G, 'corr_um': 0.0}, 'corr_um'),
+    ({**_G, 'sigmaa_um': 0.1}, 'sigmaa_um'),
+    ({'surface': 'fractal', 'sigma_um': 0.1, 'lag_um': 1.0, 'hurst': 1.5}, 'hurst'),
+    ({**_P, 'period_um': -2.0}, 'period_um'),
+    ({**_P, 'profile': 'triangle'}, 'profile'),
+    ({**_G, 'fresnel': 'unobtainium'}, 'fresnel'),
+    ({**_G, 'fresnel': 0.5, 'eta': 1.2, 'k': 3.0}, 'fresnel'),
+    ({**_G, 'tracks': 'spiral'}, 'tracks'),
+    ({**_G, 'center_u': 0.3}, 'center_u'),
 ]
 
 
@@ -546,8 +568,12 @@ def test19_scalar_vs_llvm():
     means = {}
     for v in ('scalar_rgb', 'llvm_ad_rgb'):
         use(v)
-        img = to_np(mi.render(mi.load_dict(scene_dict('gaussian')), spp=256, seed=1))
+        # Point light only: no Monte Carlo noise beyond pixel jitter, so the
+        # two code paths of the plugin (scalar, batched JIT) must agree.
+        scene = scene_dict('gaussian')
+        del scene['env']
+        img = to_np(mi.render(mi.load_dict(scene), spp=256, seed=1))
         means[v] = img.reshape(4, 4, 6, 4, 3).mean(axis=(1, 3))   # 4x6 blocks
     a, b = means['scalar_rgb'], means['llvm_ad_rgb']
-    assert np.allclose(a.mean(), b.mean(), rtol=0.02)
+    assert np.allclose(a.mean(), b.mean(), rtol=0.005)
     assert np.allclose(a, b, rtol=0.1, atol=0.02 * a.mean())

@@ -57,9 +57,31 @@ void stam_brdf_sample(const StamBrdf *b, size_t n, const float *wi, const float 
                       const float *rnd, float *wo, float *pdf, uint8_t *coherent);
 
 /* Solid-angle pdf of stam_brdf_sample at wo (non-coherent part); lambda_nm as
- * in stam_brdf_sample (NULL = RGB mode). */
+ * in stam_brdf_sample (NULL = RGB mode). The pdf returned by stam_brdf_sample
+ * is this function at the returned (f32) wo. */
 void stam_brdf_pdf(const StamBrdf *b, size_t n, const float *wi, const float *wo,
                    const float *lambda_nm, float *pdf);
+
+/* Discrete probability with which stam_brdf_sample picks the coherent lobe
+ * (what it reports as pdf for coherent samples); lambda_nm as above. */
+void stam_brdf_coherent_probability(const StamBrdf *b, size_t n, const float *wi,
+                                    const float *lambda_nm, float *out);
+
+/* Spectral paths carrying N wavelengths lambda_1..lambda_N (e.g. hero
+ * wavelength sampling): draw wo with ONE wavelength lambda_j, where j is
+ * uniform among the N (or lambda_1 when the path's wavelengths are already
+ * in random order), and weight every wavelength i by the mixture density
+ *     p(wo) = (1/N) sum_i stam_brdf_pdf(wi, wo, lambda_i)
+ * i.e. contribution_i = f(wi, wo; lambda_i) cos(theta_o) / p(wo). When the
+ * coherent lobe was chosen (coherent = 1, wo = mirror direction) use
+ *     P = (1/N) sum_i stam_brdf_coherent_probability(wi, lambda_i)
+ * and contribution_i = coherent_reflectance(lambda_i) / P. This is the
+ * one-sample mixture (balance heuristic) over the N per-wavelength
+ * strategies: unbiased for every wavelength, including those whose lobes
+ * the sampling wavelength does not cover (the defensive cosine share of
+ * every strategy keeps p > 0 wherever f > 0). Dividing by the sampling
+ * wavelength's pdf alone is unbiased too but has a large variance where the
+ * other wavelengths' lobes lie (diffraction orders move with lambda). */
 
 /* Flags describing the material, for renderers. */
 #define STAM_FLAG_HAS_COHERENT 1u   /* a coherent delta lobe can be non-zero */

@@ -21,6 +21,9 @@
 //! the continuous part (inverse normal CDF per axis, inverse radial CDF, or
 //! uniform-in-bin for the RGB rainbow of gratings).
 
+// `!(x > y)` is deliberate throughout: it is true for NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::brdf::{in_band, wavenumber_per_um, Brdf, Surface, COHERENT_MAX_G};
 use crate::geometry::{normalize_direction, reflect, PairGeometry, MIN_COS};
 use glam::DVec3;
@@ -665,7 +668,7 @@ fn rainbow_grating_component(
     let (lo, hi) = RGB_BAND_NM;
     // |u| <= 2 bounds every propagating order.
     let n_max_f = (2.0 * 1000.0 * period_um / lo).floor();
-    if !(n_max_f >= 0.0 && n_max_f < 1e6) {
+    if !(0.0..1e6).contains(&n_max_f) {
         return Component::cosine_only();
     }
     let n_max = n_max_f as i64;

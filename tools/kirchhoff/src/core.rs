@@ -1,0 +1,115 @@
+//! The core side of the comparison: f / G with fresnel = 1, i.e. the core's
+//! kernel K = k^2 / (4 pi^2 w^2) <|P|^2>/A.
+//!
+//! Preferred route: `stam::Brdf::from_json(..).eval_spectral(wi, wo, lambda)`
+//! divided by G. While the core's colour module is still a stand-in that
+//! panics when a `Brdf` is built (spectrum branch not merged), the same
+//! kernel is reached through the surface model that `Brdf::new` would build
+//! (`MaterialParams::from_json` -> the model's `kernel(k, &PairGeometry)`):
+//! identical numbers with F^2 = 1, minus the final non-negative guard.
+
+use glam::DVec3;
+use stam::geometry::PairGeometry;
+use stam::params::{MaterialParams, SurfaceParams};
+
+/// Prefix of the route of an unavailable core.
+pub const UNAVAILABLE: &str = "core unavailable";
+
+pub enum Core {
+    Brdf(Box<stam::Brdf>),
+    Gaussian(stam::gaussian::GaussianSurface),
+    Fractal(stam::fractal::FractalSurface),
+    Periodic(stam::periodic::PeriodicSurface),
+    /// The core refused the parameters (e.g. a model still a stand-in): the
+    /// ground truth is still computed and reported, without a comparison.
+    Unavailable(String),
+}
+
+/// Whether `Brdf::new` works (the colour module's rule is implemented).
+fn brdf_available() -> bool {
+    static OK: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *OK.get_or_init(|| {
+        let hook = std::panic::take_hook();
+        std::panic::set_hook(Box::new(|_| {}));
+        let ok = std::panic::catch_unwind(|| {
+            stam::spectrum::smooth_rule(stam::params::DEFAULT_RGB_NODES);
+        })
+        .is_ok();
+        std::panic::set_hook(hook);
+        ok
+    })
+}
+
+impl Core {
+    /// The core for these parameters, or `Unavailable` with the core's message.
+    pub fn new(json: &str) -> Core {
+        Core::from_json(json).unwrap_or_else(Core::Unavailable)
+    }
+
+    pub fn from_json(json: &str) -> Result<Core, String> {
+        if brdf_available() {
+            return stam::Brdf::from_json(json)
+                .map(|b| Core::Brdf(Box::new(b)))
+                .map_err(|e| e.message);
+        }
+        let params = MaterialParams::from_json(json).map_err(|e| e.message)?;
+        Ok(match params.surface {
+            SurfaceParams::Gaussian {
+                sigma_um,
+                corr_x_um,
+                corr_y_um,
+                anisotropic,
+            } => Core::Gaussian(if anisotropic {
+                stam::gaussian::GaussianSurface::anisotropic(sigma_um, corr_x_um, corr_y_um)
+            } else {
+                stam::gaussian::GaussianSurface::isotropic(sigma_um, corr_x_um)
+            }),
+            SurfaceParams::Fractal {
+                hurst,
+                sigma_um,
+                lag_um,
+            } => Core::Fractal(stam::fractal::FractalSurface::new(hurst, sigma_um, lag_um)?),
+            SurfaceParams::Periodic {
+                period_um,
+                coherence_um,
+                profile,
+            } => Core::Periodic(stam::periodic::PeriodicSurface::new(
+                period_um,
+                coherence_um,
+                profile,
+            )?),
+        })
+    }
+
+    /// Which route is in use (for the report).
+    pub fn route(&self) -> String {
+        match self {
+            Core::Brdf(_) => "Brdf::eval_spectral / G".into(),
+            Core::Unavailable(m) => format!("{UNAVAILABLE}: {m}"),
+            _ => "surface kernel (Brdf stand-in)".into(),
+        }
+    }
+
+    pub fn available(&self) -> bool {
+        !matches!(self, Core::Unavailable(_))
+    }
+
+    /// f / G with F^2 = 1 at (wi, wo, lambda).
+    pub fn f_over_g(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
+        if let Core::Brdf(b) = self {
+            let f = b.eval_spectral(wi, wo, lambda_nm);
+            return f / crate::optics::geometric_factor(wi, wo);
+        }
+        let Some(geom) = PairGeometry::new(wi, wo) else {
+            return 0.0;
+        };
+        let k = crate::optics::wavenumber(lambda_nm);
+        match self {
+            Core::Gaussian(s) => s.kernel(k, &geom),
+            Core::Fractal(s) => s.kernel(k, &geom),
+            Core::Periodic(s) => s.kernel(k, &geom),
+            Core::Unavailable(_) => f64::NAN,
+            Core::Brdf(_) => unreachable!(),
+        }
+    }
+}

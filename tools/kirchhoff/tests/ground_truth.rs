@@ -1,0 +1,132 @@
+//! Reduced Kirchhoff ground truth (CI): the core must agree with brute-force
+//! FFT Monte Carlo averages within the Monte Carlo error (4 sigma) and 5% on
+//! every resolved bin, for Gaussian (isotropic, anisotropic), fractal and
+//! periodic surfaces. A core perturbed by +-10% must be rejected (the test's
+//! power). Cases: kirchhoff::cases::ci_random / ci_periodic.
+
+use kirchhoff::cases;
+use kirchhoff::core::UNAVAILABLE;
+use kirchhoff::periodic;
+use kirchhoff::random::{self, RandomResult};
+use kirchhoff::report;
+use kirchhoff::synth::RandomModel;
+
+/// Fewest resolved bins for a random case to count as a test at all.
+const MIN_RESOLVED: usize = 8;
+
+fn check_calibration(r: &RandomResult) {
+    let name = &r.case.name;
+    let entry = |q: &str| {
+        r.calibration
+            .entries
+            .iter()
+            .find(|e| e.0 == q)
+            .unwrap_or_else(|| panic!("{name}: no calibration entry {q}"))
+            .clone()
+    };
+    match r.case.model {
+        RandomModel::Gaussian { .. } => {
+            for q in ["sigma_um", "Tx_um", "Ty_um"] {
+                let (_, target, ens, sample, se) = entry(q);
+                // The synthesis has exactly the target statistics...
+                assert!(
+                    (ens / target - 1.0).abs() < 1e-3,
+                    "{name}: {q} of the synthesis {ens} vs target {target}"
+                );
+                // ...and the measured surfaces show them.
+                assert!(
+                    (sample - ens).abs() <= 4.0 * se + 1e-3 * ens,
+                    "{name}: measured {q} {sample} +- {se} vs {ens}"
+                );
+            }
+        }
+        RandomModel::Fbm { .. } => {
+            let (_, target, s, sample, se) = entry("s_um (fit with plane)");
+            assert!(
+                (s / target - 1.0).abs() < 0.01,
+                "{name}: fitted s {s} vs the synthesis' intended {target}"
+            );
+            assert!(
+                (sample - s).abs() <= 4.0 * se + 1e-3 * s,
+                "{name}: measured s {sample} +- {se} vs ensemble {s}"
+            );
+            let (_, _, resid, _, _) = entry("max rel. residual of fit");
+            assert!(
+                resid < 3e-3,
+                "{name}: D is not a power law over the fit range: {resid}"
+            );
+        }
+    }
+}
+
+fn run_random(scale: f64) -> Vec<(String, usize, usize)> {
+    cases::ci_random()
+        .iter()
+        .map(|c| {
+            let r = random::run(c, scale).unwrap_or_else(|e| panic!("{e}"));
+            assert!(
+                !r.core_route.starts_with(UNAVAILABLE),
+                "{}: {}",
+                c.name,
+                r.core_route
+            );
+            if scale == 1.0 {
+                check_calibration(&r);
+            }
+            let s = report::summarise(&r);
+            (c.name.clone(), s.resolved, s.failed)
+        })
+        .collect()
+}
+
+fn run_periodic(scale: f64) -> Vec<(String, usize, usize)> {
+    cases::ci_periodic()
+        .iter()
+        .map(|c| {
+            let r = periodic::run(c, scale).unwrap_or_else(|e| panic!("{e}"));
+            assert!(
+                !r.core_route.starts_with(UNAVAILABLE),
+                "{}: {}",
+                c.name,
+                r.core_route
+            );
+            let (mut res, mut fail) = (0, 0);
+            for p in &r.points {
+                let (rv, pv) = periodic::verdict(p, r.peak_max);
+                res += rv as usize;
+                fail += (rv && !pv) as usize;
+            }
+            (c.name.clone(), res, fail)
+        })
+        .collect()
+}
+
+#[test]
+fn core_agrees_with_kirchhoff_ground_truth() {
+    let mut bad = Vec::new();
+    for (name, resolved, failed) in run_random(1.0).into_iter().chain(run_periodic(1.0)) {
+        println!("{name}: resolved {resolved}, failed {failed}");
+        assert!(
+            resolved >= MIN_RESOLVED,
+            "{name}: only {resolved} resolved bins"
+        );
+        if failed > 0 {
+            bad.push(format!(
+                "{name}: {failed} of {resolved} resolved bins disagree"
+            ));
+        }
+    }
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+}
+
+#[test]
+fn a_core_off_by_ten_percent_is_rejected() {
+    for scale in [1.1, 0.9] {
+        for (name, resolved, failed) in run_random(scale).into_iter().chain(run_periodic(scale)) {
+            assert!(
+                failed > 0 && failed * 2 >= resolved,
+                "{name}: core x {scale} passed ({failed} of {resolved} resolved bins failed)"
+            );
+        }
+    }
+}
