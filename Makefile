@@ -4,6 +4,11 @@
 #   make core     Rust core (cargo, release): target/release/libstam.{a,so}
 #   make plugin   Mitsuba BSDF plugin: build/plugins/diffraction.so
 #   make setup    system packages + .venv (scripts/setup.sh)
+#   make render-tool  the Rust-only reference renderer: target/release/stam-render
+#   make demo     setup, core, plugin, then render scenes/ to out/gallery/ (PNG, EXR,
+#                 contact_sheet.png; scripts/render_gallery.py)
+#   make compare  Mitsuba vs Rust-only comparison to out/compare/ (scripts/compare.py;
+#                 exits non-zero when a check fails)
 # Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
 # override to link a different build of the core).
 
@@ -36,10 +41,19 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo core plugin setup clean-plugin test test-rust test-python lint bench
+.PHONY: all demo compare render-tool core plugin setup clean-plugin test test-rust test-python lint bench
 all: plugin
 
 demo: setup plugin
+	@start=$$(date +%s); \
+	$(PYTHON) scripts/render_gallery.py && \
+	echo "[demo] done: out/gallery/contact_sheet.png (renders $$(( $$(date +%s) - start )) s)"
+
+compare: setup plugin render-tool
+	$(PYTHON) scripts/compare.py
+
+render-tool:
+	$(CARGO) build --release -p stam-render
 
 setup:
 	bash scripts/setup.sh
@@ -69,7 +83,7 @@ lint:
 test-rust:
 	$(CARGO) test --workspace
 
-test-python: plugin
+test-python: plugin render-tool
 	$(PYTHON) -m pytest -q tests
 
 # Everything, in the order that fails fastest.
