@@ -21,9 +21,6 @@
 //! the continuous part (inverse normal CDF per axis, inverse radial CDF, or
 //! uniform-in-bin for the RGB rainbow of gratings).
 
-// `!(x > y)` is deliberate throughout: it is true for NaN.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
 use crate::brdf::{in_band, wavenumber_per_um, Brdf, Surface, COHERENT_MAX_G};
 use crate::geometry::{normalize_direction, reflect, PairGeometry, MIN_COS};
 use glam::DVec3;
@@ -453,10 +450,13 @@ impl DirectionSampler<'_> {
             }
         }
         let pdf = sum / self.components.len() as f64;
-        if pdf.is_finite() {
-            pdf.max(0.0)
-        } else {
+        // A sum that overflowed (densities near f64::MAX at the exact mirror
+        // direction of a fractal with tiny hurst) is clamped like eval's
+        // outputs, not zeroed: pdf must stay > 0 wherever f > 0.
+        if pdf.is_nan() {
             0.0
+        } else {
+            pdf.clamp(0.0, f64::MAX)
         }
     }
 
