@@ -277,7 +277,7 @@ impl Brdf {
                     .integrate(&self.fresnel, geom.cos_half, values)
             }
         };
-        rgb.map(|c| finite_non_negative(c * geom.geometric_factor))
+        gamut_map(rgb.map(|c| c * geom.geometric_factor)).map(finite_non_negative)
     }
 
     /// The same RGB projection by the project's reference: spectral
@@ -324,10 +324,36 @@ impl Brdf {
         for (v, &k) in values.iter_mut().zip(&self.rgb_rule.k_per_um) {
             *v = s.coherent_attenuation(k, cos_i);
         }
-        self.rgb_rule
-            .integrate(&self.fresnel, cos_i, values)
-            .map(finite_non_negative)
+        let rgb = self.rgb_rule.integrate(&self.fresnel, cos_i, values);
+        gamut_map(rgb).map(finite_non_negative)
     }
+}
+
+/// Luminance weights of linear sRGB (the Y row of sRGB -> XYZ).
+pub const SRGB_LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// Brings an RGB value into the sRGB gamut without changing its luminance.
+///
+/// The sharp spectral peaks of gratings are purer than any sRGB primary:
+/// their exact projection has a negative channel (the compact disc's green
+/// arcs project to about (-0.59, 1, -0.08)). Outputs must be non-negative,
+/// and clamping the negative channel would add light (+47% red over the
+/// compact disc). Instead the colour is desaturated towards the grey of the
+/// same luminance, just enough for the most negative channel to reach 0: Y
+/// (and so the brightness of a render) is exact and the hue is kept; only
+/// the saturation beyond the gamut is lost. In-gamut values are unchanged.
+#[inline]
+pub fn gamut_map(rgb: [f64; 3]) -> [f64; 3] {
+    let min = rgb[0].min(rgb[1]).min(rgb[2]);
+    if min >= 0.0 || min.is_nan() {
+        return rgb;
+    }
+    let y = SRGB_LUMINANCE[0] * rgb[0] + SRGB_LUMINANCE[1] * rgb[1] + SRGB_LUMINANCE[2] * rgb[2];
+    if !(y > 0.0) {
+        return [0.0; 3];
+    }
+    let s = min / (min - y);
+    rgb.map(|c| c + s * (y - c))
 }
 
 /// cos(theta_i) of a direction above the horizon, else None.
@@ -389,8 +415,8 @@ mod tests {
             for (wi, wo) in directions() {
                 let fast = brdf.eval_rgb(wi, wo);
                 // Saturated spectral colours fall outside the sRGB gamut; the
-                // outputs are clamped at 0 and so is the reference.
-                let reference = brdf.eval_rgb_reference(wi, wo, 1.0).map(|c| c.max(0.0));
+                // outputs are gamut-mapped and so is the reference.
+                let reference = gamut_map(brdf.eval_rgb_reference(wi, wo, 1.0));
                 let scale = reference.iter().cloned().fold(0.0, f64::max);
                 if scale < 1e-12 {
                     continue;
@@ -410,6 +436,65 @@ mod tests {
         println!(
             "RGB vs 1 nm reference, smooth models: worst error {worst:.2e} of the largest channel"
         );
+    }
+
+    #[test]
+    fn gamut_mapping_keeps_luminance_and_in_gamut_colours() {
+        let luminance = |c: [f64; 3]| {
+            SRGB_LUMINANCE[0] * c[0] + SRGB_LUMINANCE[1] * c[1] + SRGB_LUMINANCE[2] * c[2]
+        };
+        assert_eq!(gamut_map([0.2, 0.5, 0.1]), [0.2, 0.5, 0.1]);
+        for rgb in [[-0.59, 1.0, -0.08], [2.0, -0.3, 0.1], [-1e-3, 0.2, 3.0]] {
+            let m = gamut_map(rgb);
+            assert!(m.iter().all(|&c| c >= -1e-15), "{m:?}");
+            assert!(
+                m.iter().any(|&c| c.abs() < 1e-12),
+                "{m:?} touches the gamut"
+            );
+            assert!((luminance(m) - luminance(rgb)).abs() < 1e-12);
+            // Hue kept: the mapped colour lies on the segment from the
+            // original towards its grey.
+            let y = luminance(rgb);
+            let t = (m[1] - rgb[1]) / (y - rgb[1]);
+            for c in 0..3 {
+                assert!((m[c] - (rgb[c] + t * (y - rgb[c]))).abs() < 1e-12);
+            }
+        }
+        assert_eq!(gamut_map([-1.0, 0.1, 0.1]), [0.0; 3]);
+    }
+
+    /// The compact disc's RGB keeps the luminance of the exact projection
+    /// (a reference fine enough to resolve its peaks) within 1%.
+    #[test]
+    fn compact_disc_rgb_keeps_luminance() {
+        let brdf = Brdf::from_json(r#"{"surface":"cd","coherence_um":10}"#).unwrap();
+        let wi = DVec3::new(0.3, 0.0, 0.954).normalize();
+        let mut checked = 0;
+        for i in 0..40 {
+            let t = -0.9 + 1.8 * i as f64 / 39.0;
+            let wo = DVec3::new(t, 0.02, (1.0 - t * t - 0.0004).sqrt());
+            let exact = brdf.eval_rgb_reference(wi, wo, 0.02);
+            let y_exact = SRGB_LUMINANCE
+                .iter()
+                .zip(exact)
+                .map(|(w, c)| w * c)
+                .sum::<f64>();
+            if y_exact < 1e-6 {
+                continue;
+            }
+            let fast = brdf.eval_rgb(wi, wo);
+            let y_fast = SRGB_LUMINANCE
+                .iter()
+                .zip(fast)
+                .map(|(w, c)| w * c)
+                .sum::<f64>();
+            assert!(
+                (y_fast - y_exact).abs() < 1e-2 * y_exact,
+                "{fast:?} vs {exact:?}"
+            );
+            checked += 1;
+        }
+        assert!(checked > 5);
     }
 
     #[test]
