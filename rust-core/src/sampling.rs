@@ -450,10 +450,13 @@ impl DirectionSampler<'_> {
             }
         }
         let pdf = sum / self.components.len() as f64;
-        if pdf.is_finite() {
-            pdf.max(0.0)
-        } else {
+        // A sum that overflowed (densities near f64::MAX at the exact mirror
+        // direction of a fractal with tiny hurst) is clamped like eval's
+        // outputs, not zeroed: pdf must stay > 0 wherever f > 0.
+        if pdf.is_nan() {
             0.0
+        } else {
+            pdf.clamp(0.0, f64::MAX)
         }
     }
 
