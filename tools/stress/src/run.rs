@@ -333,7 +333,7 @@ pub fn run(options: &Options) -> Report {
         if options.inject_nan_every > 0 {
             for o in out.iter_mut() {
                 spectral_outputs += 1;
-                if spectral_outputs % options.inject_nan_every == 0 {
+                if spectral_outputs.is_multiple_of(options.inject_nan_every) {
                     *o = f32::NAN;
                 }
             }
@@ -452,7 +452,7 @@ pub fn run(options: &Options) -> Report {
                     i,
                 );
                 check_sample(&mut report, w, pdf_s[i] as f64, coh[i] != 0, 1e-5, &what);
-                report.check_value(pdf_check[i] as f64, &what);
+                report.check_value(pdf_check[i] as f64, what);
                 if pdf_s[i] > 0.0 && coh[i] == 0 {
                     let (a, c) = (pdf_s[i] as f64, pdf_check[i] as f64);
                     if !((a - c).abs() <= AGREEMENT * a.max(c)) {
