@@ -41,7 +41,7 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo compare render-tool core plugin setup clean-plugin test test-rust test-python lint bench
+.PHONY: all demo compare render-tool core plugin setup clean-plugin test test-rust test-python lint bench stress
 all: plugin
 
 demo: setup plugin
@@ -89,5 +89,15 @@ test-python: plugin render-tool
 # Everything, in the order that fails fastest.
 test: setup lint test-rust test-python
 
+# ns per evaluation (docs/performance.md) and run time against error of every
+# accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
 bench:
 	$(CARGO) bench -p stam-core --bench brdf
+	$(PYTHON) scripts/bench_table.py docs/performance.md
+	$(CARGO) run --release -p stress --bin pareto -- target/pareto/errors.json
+	$(CARGO) bench -p stress --bench pareto
+	$(PYTHON) scripts/plot_pareto.py
+
+# The full numerical stress run (10^7 evaluations; CI runs 10^5 in test-rust).
+stress:
+	$(CARGO) run --release -p stress -- --count 10000000 --write docs/stress.md

@@ -1,0 +1,74 @@
+//! cargo fuzz run params_json
+//!
+//! The input is split at the first 0xFF byte: before it, the parameter text
+//! given to stam_brdf_new (cut at a NUL as a C caller would); after it, the
+//! floats (4 bytes each) given to every ABI entry point when the material is
+//! accepted. Invariants: no panic or crash (the ABI catches panics and would
+//! report "internal error"), every refusal has a non-empty message, every
+//! output is finite and >= 0, sampled directions are unit vectors when their
+//! pdf is > 0.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use stam::ffi::*;
+use std::ffi::{c_char, CString};
+
+fuzz_target!(|data: &[u8]| {
+    let split = data.iter().position(|&b| b == 0xFF).unwrap_or(data.len());
+    let (text, rest) = data.split_at(split);
+    let text = &text[..text.iter().position(|&b| b == 0).unwrap_or(text.len())];
+    let c = CString::new(text).unwrap();
+    let floats: Vec<f32> = rest
+        .get(1..)
+        .unwrap_or(&[])
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let mut err = vec![0 as c_char; 256];
+    let p = unsafe { stam_brdf_new(c.as_ptr(), err.as_mut_ptr(), err.len()) };
+    if p.is_null() {
+        let len = err.iter().position(|&c| c == 0).expect("message is NUL-terminated");
+        assert!(len > 0, "refusal without a message");
+        let msg: Vec<u8> = err[..len].iter().map(|&c| c as u8).collect();
+        let msg = String::from_utf8_lossy(&msg);
+        assert!(!msg.contains("internal error"), "caught panic: {msg}");
+        return;
+    }
+    let n = 4;
+    let at = |i: usize| if floats.is_empty() { 0.5 } else { floats[i % floats.len()] };
+    let wi: Vec<f32> = (0..3 * n).map(at).collect();
+    let wo: Vec<f32> = (0..3 * n).map(|i| at(i + 3 * n)).collect();
+    let lam: Vec<f32> = (0..n).map(|i| at(i + 6 * n)).collect();
+    let rnd: Vec<f32> = (0..3 * n).map(|i| at(i + 7 * n)).collect();
+    let mut out = vec![0f32; 3 * n];
+    let mut pdf = vec![0f32; n];
+    let mut coh = vec![0u8; n];
+    let ok = |v: &[f32]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
+    unsafe {
+        stam_brdf_eval_spectral(p, n, wi.as_ptr(), wo.as_ptr(), lam.as_ptr(), out.as_mut_ptr());
+        assert!(ok(&out[..n]));
+        stam_brdf_eval_rgb(p, n, wi.as_ptr(), wo.as_ptr(), out.as_mut_ptr());
+        assert!(ok(&out));
+        stam_brdf_coherent_spectral(p, n, wi.as_ptr(), lam.as_ptr(), out.as_mut_ptr());
+        assert!(ok(&out[..n]));
+        stam_brdf_coherent_rgb(p, n, wi.as_ptr(), out.as_mut_ptr());
+        assert!(ok(&out));
+        for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
+            stam_brdf_sample(p, n, wi.as_ptr(), lam_ptr, rnd.as_ptr(), out.as_mut_ptr(), pdf.as_mut_ptr(), coh.as_mut_ptr());
+            assert!(ok(&pdf));
+            for i in 0..n {
+                if pdf[i] > 0.0 {
+                    let l: f64 = out[3 * i..3 * i + 3].iter().map(|x| (*x as f64).powi(2)).sum::<f64>().sqrt();
+                    assert!((l - 1.0).abs() < 1e-5, "sampled wo not unit");
+                }
+            }
+            stam_brdf_pdf(p, n, wi.as_ptr(), wo.as_ptr(), lam_ptr, pdf.as_mut_ptr());
+            assert!(ok(&pdf));
+            stam_brdf_coherent_probability(p, n, wi.as_ptr(), lam_ptr, pdf.as_mut_ptr());
+            assert!(ok(&pdf) && pdf.iter().all(|&x| x <= 1.0));
+        }
+        let _ = stam_brdf_flags(p);
+        let _ = stam_brdf_memory_bytes(p);
+        stam_brdf_free(p);
+    }
+});

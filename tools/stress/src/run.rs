@@ -1,0 +1,564 @@
+//! The stress runner: random materials, hostile inputs, every ABI entry
+//! point (f32) beside the Rust API (f64), and the checks of the header's
+//! contract (rust-core/include/stam.h):
+//! - every output finite and >= 0 (ABI and Rust);
+//! - ABI (f32) and Rust (f64, at the same f32-rounded inputs) agree to 1e-4
+//!   relative wherever the f64 value lies in [1e-30, 1e30];
+//! - sampling returns a unit vector above the horizon with a finite pdf > 0,
+//!   or a clean failure (pdf 0); the returned pdf equals stam_brdf_pdf at the
+//!   returned direction; pdf > 0 wherever f > 0 (an unbiased estimator needs
+//!   it); the coherent probability lies in [0, 1];
+//! - every refused material has a non-empty message.
+
+use crate::gen::{self, Rng};
+use glam::DVec3;
+use stam::ffi;
+use std::ffi::{c_char, CString};
+use std::fmt::Write as _;
+use std::time::Instant;
+
+/// Relative agreement required between the f32 ABI and the f64 API.
+pub const AGREEMENT: f64 = 1e-4;
+/// |f64 value| range over which agreement is checked (representable in f32
+/// with full relative precision).
+pub const REPRESENTABLE: (f64, f64) = (1e-30, 1e30);
+
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Minimum number of evaluations (ABI + Rust outputs) to perform.
+    pub count: u64,
+    pub seed: u64,
+    /// Direction pairs per material.
+    pub batch: usize,
+    /// Negative control: overwrite every n-th ABI spectral output with NaN
+    /// before the checks (0 = never).
+    pub inject_nan_every: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            count: 100_000,
+            seed: 1,
+            batch: 128,
+            inject_nan_every: 0,
+        }
+    }
+}
+
+/// Counts of one run. `failures()` is the number of contract violations.
+#[derive(Clone, Debug, Default)]
+pub struct Report {
+    pub materials: u64,
+    pub materials_per_kind: [u64; gen::SURFACES.len()],
+    pub refused: u64,
+    pub refused_without_message: u64,
+    pub refusal_examples: Vec<String>,
+    pub construction_seconds: f64,
+    pub slowest_construction: (f64, String),
+    pub evaluations_abi: u64,
+    pub evaluations_rust: u64,
+    pub nan: u64,
+    pub inf: u64,
+    pub negative: u64,
+    pub compared: u64,
+    pub disagreements: u64,
+    pub worst_relative_difference: f64,
+    pub samples: u64,
+    pub sample_failures: u64,
+    pub coherent_samples: u64,
+    pub bad_samples: u64,
+    pub pdf_mismatches: u64,
+    pub f_positive_pdf_zero: u64,
+    pub bad_coherent_probability: u64,
+    pub seconds: f64,
+    /// The first violations, for diagnosis.
+    pub examples: Vec<String>,
+}
+
+impl Report {
+    pub fn evaluations(&self) -> u64 {
+        self.evaluations_abi + self.evaluations_rust
+    }
+
+    pub fn failures(&self) -> u64 {
+        self.nan
+            + self.inf
+            + self.negative
+            + self.disagreements
+            + self.bad_samples
+            + self.pdf_mismatches
+            + self.f_positive_pdf_zero
+            + self.bad_coherent_probability
+            + self.refused_without_message
+    }
+
+    fn fail(&mut self, what: String) {
+        if self.examples.len() < 20 {
+            self.examples.push(what);
+        }
+    }
+
+    /// Checks one output value (f64 from either path).
+    fn check_value(&mut self, x: f64, what: impl Fn() -> String) {
+        let bad = if x.is_nan() {
+            self.nan += 1;
+            true
+        } else if x.is_infinite() {
+            self.inf += 1;
+            true
+        } else if x < 0.0 {
+            self.negative += 1;
+            true
+        } else {
+            false
+        };
+        if bad {
+            let w = what();
+            self.fail(format!("{w}: output {x}"));
+        }
+    }
+
+    /// Compares the f32 ABI output with the f64 Rust value.
+    fn compare(&mut self, abi: f32, rust: f64, what: impl Fn() -> String) {
+        let a = rust.abs();
+        if !(a >= REPRESENTABLE.0 && a <= REPRESENTABLE.1) {
+            return;
+        }
+        self.compared += 1;
+        let d = (abi as f64 - rust).abs() / a;
+        if d > self.worst_relative_difference {
+            self.worst_relative_difference = d;
+        }
+        if !(d <= AGREEMENT) {
+            self.disagreements += 1;
+            let w = what();
+            self.fail(format!("{w}: ABI {abi:e} vs Rust {rust:e}"));
+        }
+    }
+
+    /// Markdown summary (docs/stress.md's table).
+    pub fn markdown(&self, options: &Options) -> String {
+        let mut s = String::new();
+        let kinds: Vec<String> = gen::SURFACES
+            .iter()
+            .zip(self.materials_per_kind)
+            .map(|(k, n)| format!("{k} {n}"))
+            .collect();
+        let _ = writeln!(s, "| quantity | count |\n|---|---|");
+        let rows: Vec<(&str, String)> = vec![
+            ("seed", options.seed.to_string()),
+            ("evaluations (total)", self.evaluations().to_string()),
+            (
+                "  through the C ABI (f32)",
+                self.evaluations_abi.to_string(),
+            ),
+            (
+                "  through the Rust API (f64)",
+                self.evaluations_rust.to_string(),
+            ),
+            (
+                "materials built (per kind)",
+                format!("{} ({})", self.materials, kinds.join(", ")),
+            ),
+            (
+                "materials refused (all with a message)",
+                self.refused.to_string(),
+            ),
+            (
+                "refusals without a message",
+                self.refused_without_message.to_string(),
+            ),
+            ("NaN outputs", self.nan.to_string()),
+            ("infinite outputs", self.inf.to_string()),
+            ("negative outputs", self.negative.to_string()),
+            ("f32/f64 pairs compared", self.compared.to_string()),
+            (
+                "f32/f64 disagreements (> 1e-4 relative)",
+                self.disagreements.to_string(),
+            ),
+            (
+                "worst f32/f64 relative difference",
+                format!("{:.2e}", self.worst_relative_difference),
+            ),
+            ("samples drawn (ABI + Rust)", self.samples.to_string()),
+            ("  clean failures (pdf 0)", self.sample_failures.to_string()),
+            (
+                "  coherent (mirror) samples",
+                self.coherent_samples.to_string(),
+            ),
+            (
+                "  bad samples (not unit, below horizon, pdf not finite)",
+                self.bad_samples.to_string(),
+            ),
+            (
+                "  returned pdf != stam_brdf_pdf at the returned wo",
+                self.pdf_mismatches.to_string(),
+            ),
+            ("f > 0 where pdf = 0", self.f_positive_pdf_zero.to_string()),
+            (
+                "coherent probability outside [0, 1]",
+                self.bad_coherent_probability.to_string(),
+            ),
+            (
+                "construction time (total, s)",
+                format!("{:.2}", self.construction_seconds),
+            ),
+            (
+                "slowest construction (s)",
+                format!("{:.3}", self.slowest_construction.0),
+            ),
+            ("run time (s)", format!("{:.1}", self.seconds)),
+        ];
+        for (k, v) in rows {
+            let _ = writeln!(s, "| {k} | {v} |");
+        }
+        s
+    }
+}
+
+/// f32 view of a direction, as the ABI receives it, and the f64 direction
+/// the Rust side is evaluated at (the same rounded values).
+fn rounded(d: DVec3) -> ([f32; 3], DVec3) {
+    let f = [d.x as f32, d.y as f32, d.z as f32];
+    (f, DVec3::new(f[0] as f64, f[1] as f64, f[2] as f64))
+}
+
+struct Material(*mut ffi::StamBrdf);
+
+impl Drop for Material {
+    fn drop(&mut self) {
+        unsafe { ffi::stam_brdf_free(self.0) }
+    }
+}
+
+/// Builds a material through the ABI; Err(message) on refusal.
+fn build(json: &str) -> Result<Material, String> {
+    let c = CString::new(json).map_err(|e| e.to_string())?;
+    let mut err = vec![0 as c_char; 512];
+    let p = unsafe { ffi::stam_brdf_new(c.as_ptr(), err.as_mut_ptr(), err.len()) };
+    if p.is_null() {
+        let bytes: Vec<u8> = err
+            .iter()
+            .take_while(|&&c| c != 0)
+            .map(|&c| c as u8)
+            .collect();
+        Err(String::from_utf8_lossy(&bytes).into_owned())
+    } else {
+        Ok(Material(p))
+    }
+}
+
+/// Runs the stress test until at least `options.count` evaluations are done.
+pub fn run(options: &Options) -> Report {
+    let start = Instant::now();
+    let mut report = Report::default();
+    let mut rng = Rng::new(options.seed);
+    let mut kind = 0usize;
+    let mut spectral_outputs = 0u64;
+    while report.evaluations() < options.count {
+        let json = gen::material(&mut rng, kind);
+        let this_kind = kind % gen::SURFACES.len();
+        kind += 1;
+        let t0 = Instant::now();
+        let built = build(&json);
+        let dt = t0.elapsed().as_secs_f64();
+        report.construction_seconds += dt;
+        if dt > report.slowest_construction.0 {
+            report.slowest_construction = (dt, json.clone());
+        }
+        let material = match built {
+            Ok(m) => m,
+            Err(message) => {
+                report.refused += 1;
+                if message.trim().is_empty() {
+                    report.refused_without_message += 1;
+                    report.fail(format!("refused without a message: {json}"));
+                } else if report.refusal_examples.len() < 10 {
+                    report.refusal_examples.push(format!("{json}: {message}"));
+                }
+                continue;
+            }
+        };
+        report.materials += 1;
+        report.materials_per_kind[this_kind] += 1;
+        let brdf = unsafe { &(*material.0).brdf };
+        let b = material.0 as *const ffi::StamBrdf;
+        let n = options.batch;
+
+        // Inputs: f64 originals, the f32 arrays the ABI gets and the rounded
+        // f64 values the Rust side is evaluated at.
+        let mut wi64 = Vec::with_capacity(n);
+        let mut wi32 = Vec::with_capacity(3 * n);
+        let mut wo32 = Vec::with_capacity(3 * n);
+        let mut wi_r = Vec::with_capacity(n);
+        let mut wo_r = Vec::with_capacity(n);
+        let mut lam32 = Vec::with_capacity(n);
+        let mut rnd32 = Vec::with_capacity(3 * n);
+        let mut rnd64 = Vec::with_capacity(n);
+        for _ in 0..n {
+            let wi = gen::direction(&mut rng);
+            let wo = gen::direction_near_mirror(&mut rng, wi);
+            let (fi, ri) = rounded(wi);
+            let (fo, ro) = rounded(wo);
+            wi64.push(wi);
+            wi32.extend_from_slice(&fi);
+            wo32.extend_from_slice(&fo);
+            wi_r.push(ri);
+            wo_r.push(ro);
+            lam32.push(gen::wavelength(&mut rng) as f32);
+            let r = gen::uniforms(&mut rng);
+            rnd32.extend(r.iter().map(|&x| x as f32));
+            rnd64.push(r);
+        }
+        let lam_r: Vec<f64> = lam32.iter().map(|&l| l as f64).collect();
+        let ctx = |what: &'static str, i: usize| {
+            let (wi, wo, l) = (wi_r[i], wo_r[i], lam_r[i]);
+            let json = &json;
+            move || format!("{what} {json} wi {wi:?} wo {wo:?} lambda {l}")
+        };
+
+        // Spectral.
+        let mut out = vec![0f32; n];
+        unsafe {
+            ffi::stam_brdf_eval_spectral(
+                b,
+                n,
+                wi32.as_ptr(),
+                wo32.as_ptr(),
+                lam32.as_ptr(),
+                out.as_mut_ptr(),
+            )
+        };
+        if options.inject_nan_every > 0 {
+            for o in out.iter_mut() {
+                spectral_outputs += 1;
+                if spectral_outputs.is_multiple_of(options.inject_nan_every) {
+                    *o = f32::NAN;
+                }
+            }
+        }
+        let mut f_spectral = vec![0.0; n];
+        for i in 0..n {
+            let f = brdf.eval_spectral(wi_r[i], wo_r[i], lam_r[i]);
+            f_spectral[i] = f;
+            report.check_value(out[i] as f64, ctx("ABI eval_spectral", i));
+            report.check_value(f, ctx("Rust eval_spectral", i));
+            report.compare(out[i], f, ctx("eval_spectral", i));
+        }
+        report.evaluations_abi += n as u64;
+        report.evaluations_rust += n as u64;
+
+        // RGB.
+        let mut out3 = vec![0f32; 3 * n];
+        unsafe { ffi::stam_brdf_eval_rgb(b, n, wi32.as_ptr(), wo32.as_ptr(), out3.as_mut_ptr()) };
+        let mut f_rgb = vec![[0.0; 3]; n];
+        for i in 0..n {
+            let f = brdf.eval_rgb(wi_r[i], wo_r[i]);
+            f_rgb[i] = f;
+            for c in 0..3 {
+                report.check_value(out3[3 * i + c] as f64, ctx("ABI eval_rgb", i));
+                report.check_value(f[c], ctx("Rust eval_rgb", i));
+                report.compare(out3[3 * i + c], f[c], ctx("eval_rgb", i));
+            }
+        }
+        report.evaluations_abi += n as u64;
+        report.evaluations_rust += n as u64;
+
+        // Coherent lobe, spectral and RGB, and its sampling probability.
+        unsafe {
+            ffi::stam_brdf_coherent_spectral(b, n, wi32.as_ptr(), lam32.as_ptr(), out.as_mut_ptr());
+            ffi::stam_brdf_coherent_rgb(b, n, wi32.as_ptr(), out3.as_mut_ptr());
+        }
+        for i in 0..n {
+            let c = brdf.coherent_spectral(wi_r[i], lam_r[i]);
+            report.check_value(out[i] as f64, ctx("ABI coherent_spectral", i));
+            report.check_value(c, ctx("Rust coherent_spectral", i));
+            report.compare(out[i], c, ctx("coherent_spectral", i));
+            let c3 = brdf.coherent_rgb(wi_r[i]);
+            for c in 0..3 {
+                report.check_value(out3[3 * i + c] as f64, ctx("ABI coherent_rgb", i));
+                report.check_value(c3[c], ctx("Rust coherent_rgb", i));
+                report.compare(out3[3 * i + c], c3[c], ctx("coherent_rgb", i));
+            }
+        }
+        report.evaluations_abi += 2 * n as u64;
+        report.evaluations_rust += 2 * n as u64;
+        for spectral in [true, false] {
+            let lam_ptr = if spectral {
+                lam32.as_ptr()
+            } else {
+                std::ptr::null()
+            };
+            unsafe {
+                ffi::stam_brdf_coherent_probability(b, n, wi32.as_ptr(), lam_ptr, out.as_mut_ptr())
+            };
+            for (i, &p) in out.iter().enumerate() {
+                if !(p >= 0.0 && p <= 1.0) {
+                    report.bad_coherent_probability += 1;
+                    let w = ctx("coherent_probability", i)();
+                    report.fail(format!("{w}: {p}"));
+                }
+            }
+            report.evaluations_abi += n as u64;
+        }
+
+        // Sampling through the ABI, spectral and RGB mode, with the pdf at
+        // the returned direction, and through the Rust API at the unrounded
+        // f64 inputs.
+        let mut wo_s = vec![0f32; 3 * n];
+        let mut pdf_s = vec![0f32; n];
+        let mut coh = vec![0u8; n];
+        let mut pdf_check = vec![0f32; n];
+        for spectral in [true, false] {
+            let lam_ptr = if spectral {
+                lam32.as_ptr()
+            } else {
+                std::ptr::null()
+            };
+            unsafe {
+                ffi::stam_brdf_sample(
+                    b,
+                    n,
+                    wi32.as_ptr(),
+                    lam_ptr,
+                    rnd32.as_ptr(),
+                    wo_s.as_mut_ptr(),
+                    pdf_s.as_mut_ptr(),
+                    coh.as_mut_ptr(),
+                );
+                ffi::stam_brdf_pdf(
+                    b,
+                    n,
+                    wi32.as_ptr(),
+                    wo_s.as_ptr(),
+                    lam_ptr,
+                    pdf_check.as_mut_ptr(),
+                );
+            }
+            report.evaluations_abi += 2 * n as u64;
+            for i in 0..n {
+                let w = DVec3::new(
+                    wo_s[3 * i] as f64,
+                    wo_s[3 * i + 1] as f64,
+                    wo_s[3 * i + 2] as f64,
+                );
+                let what = ctx(
+                    if spectral {
+                        "ABI sample (spectral)"
+                    } else {
+                        "ABI sample (RGB)"
+                    },
+                    i,
+                );
+                check_sample(&mut report, w, pdf_s[i] as f64, coh[i] != 0, 1e-5, &what);
+                report.check_value(pdf_check[i] as f64, what);
+                if pdf_s[i] > 0.0 && coh[i] == 0 {
+                    let (a, c) = (pdf_s[i] as f64, pdf_check[i] as f64);
+                    if !((a - c).abs() <= AGREEMENT * a.max(c)) {
+                        report.pdf_mismatches += 1;
+                        let w = what();
+                        report.fail(format!("{w}: sampled pdf {a:e}, stam_brdf_pdf {c:e}"));
+                    }
+                }
+                let lambda = spectral.then_some(lam_r[i]);
+                let s = brdf.sample(wi64[i], lambda.map(|_| lam_r[i]), rnd64[i]);
+                check_sample(
+                    &mut report,
+                    s.wo,
+                    s.pdf,
+                    s.coherent,
+                    1e-12,
+                    &ctx("Rust sample", i),
+                );
+                report.evaluations_rust += 1;
+            }
+        }
+
+        // pdf > 0 wherever f > 0 (at the random pairs, both modes), through
+        // the ABI's pdf.
+        for spectral in [true, false] {
+            let lam_ptr = if spectral {
+                lam32.as_ptr()
+            } else {
+                std::ptr::null()
+            };
+            unsafe {
+                ffi::stam_brdf_pdf(
+                    b,
+                    n,
+                    wi32.as_ptr(),
+                    wo32.as_ptr(),
+                    lam_ptr,
+                    pdf_check.as_mut_ptr(),
+                )
+            };
+            report.evaluations_abi += n as u64;
+            for i in 0..n {
+                let p = pdf_check[i] as f64;
+                report.check_value(p, ctx("ABI pdf", i));
+                let f_pos = if spectral {
+                    f_spectral[i] > 0.0
+                } else {
+                    f_rgb[i].iter().any(|&c| c > 0.0)
+                };
+                if f_pos {
+                    let p64 = brdf.pdf(wi_r[i], wo_r[i], spectral.then_some(lam_r[i]));
+                    report.evaluations_rust += 1;
+                    report.check_value(p64, ctx("Rust pdf", i));
+                    if !(p64 > 0.0) {
+                        report.f_positive_pdf_zero += 1;
+                        let w = ctx(
+                            if spectral {
+                                "f > 0, pdf = 0 (spectral)"
+                            } else {
+                                "f > 0, pdf = 0 (RGB)"
+                            },
+                            i,
+                        )();
+                        report.fail(w);
+                    }
+                }
+            }
+        }
+        // Flags and memory must not crash; memory is bounded.
+        unsafe {
+            let _ = ffi::stam_brdf_flags(b);
+            let _ = ffi::stam_brdf_memory_bytes(b);
+        }
+    }
+    report.seconds = start.elapsed().as_secs_f64();
+    report
+}
+
+fn check_sample(
+    report: &mut Report,
+    wo: DVec3,
+    pdf: f64,
+    coherent: bool,
+    unit_tolerance: f64,
+    what: &dyn Fn() -> String,
+) {
+    report.samples += 1;
+    if !(pdf.is_finite() && pdf >= 0.0) {
+        report.bad_samples += 1;
+        let w = what();
+        report.fail(format!("{w}: pdf {pdf}"));
+        return;
+    }
+    if pdf == 0.0 {
+        report.sample_failures += 1;
+        return;
+    }
+    if coherent {
+        report.coherent_samples += 1;
+    }
+    let unit = wo.is_finite() && (wo.length() - 1.0).abs() <= unit_tolerance;
+    if !unit || !(wo.z > 0.0) || (coherent && pdf > 1.0) {
+        report.bad_samples += 1;
+        let w = what();
+        report.fail(format!(
+            "{w}: sampled wo {wo:?} pdf {pdf} coherent {coherent}"
+        ));
+    }
+}

@@ -1,0 +1,378 @@
+//! Proptest version of the cargo-fuzz target `fuzz/fuzz_targets/params_json.rs`
+//! (run in CI): arbitrary strings and structurally valid JSON with random keys,
+//! values and types go to `stam_brdf_new` through the C ABI. No panic (a
+//! caught panic surfaces as an "internal error" message and fails here), no
+//! crash; every refusal has a non-empty message that names a parameter key or
+//! the JSON problem; every accepted material survives every ABI entry point
+//! with arbitrary floats (outputs finite and >= 0).
+
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use proptest::prelude::*;
+use std::ffi::{c_char, CString};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+static ACCEPTED: AtomicU64 = AtomicU64::new(0);
+static REFUSED: AtomicU64 = AtomicU64::new(0);
+
+/// Every key the parameters know (docs/parameters.md).
+const KEYS: [&str; 18] = [
+    "surface",
+    "sigma_um",
+    "corr_um",
+    "corr_x_um",
+    "corr_y_um",
+    "hurst",
+    "lag_um",
+    "period_um",
+    "coherence_um",
+    "profile",
+    "height_um",
+    "width_um",
+    "heights_um",
+    "fresnel",
+    "eta",
+    "k",
+    "series_tolerance",
+    "rgb_nodes",
+];
+
+/// A refusal must name a key (as a whole word) or say what is wrong with the
+/// JSON / the text.
+fn names_key_or_json_problem(message: &str) -> bool {
+    if message.contains("JSON") || message.contains("UTF-8") || message.contains("NUL") {
+        return true;
+    }
+    message
+        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .any(|w| KEYS.contains(&w))
+}
+
+/// Builds through the ABI and, on success, calls every entry point with the
+/// given floats. Returns Err(description) on a contract violation.
+fn exercise(text: &str, floats: &[f32]) -> Result<(), String> {
+    // The ABI takes a NUL-terminated string: cut at an interior NUL as a C
+    // caller would.
+    let text = text.split('\0').next().unwrap_or("");
+    let c = CString::new(text).unwrap();
+    let mut err = vec![0x55 as c_char; 256];
+    let p = unsafe { stam::ffi::stam_brdf_new(c.as_ptr(), err.as_mut_ptr(), err.len()) };
+    if p.is_null() {
+        REFUSED.fetch_add(1, Ordering::Relaxed);
+        let end = err
+            .iter()
+            .position(|&c| c == 0)
+            .ok_or("err not NUL-terminated")?;
+        let bytes: Vec<u8> = err[..end].iter().map(|&c| c as u8).collect();
+        let message = String::from_utf8(bytes).map_err(|_| "message not UTF-8".to_string())?;
+        if message.trim().is_empty() {
+            return Err(format!("refusal without a message for {text:?}"));
+        }
+        if message.contains("internal error") {
+            return Err(format!("panic caught for {text:?}: {message}"));
+        }
+        // Messages are truncated to the buffer: check the key in what fits.
+        if !names_key_or_json_problem(&message) {
+            return Err(format!("refusal names no key for {text:?}: {message}"));
+        }
+        return Ok(());
+    }
+    ACCEPTED.fetch_add(1, Ordering::Relaxed);
+    let r = call_everything(p, floats);
+    unsafe { stam::ffi::stam_brdf_free(p) };
+    r.map_err(|e| format!("{text}: {e}"))
+}
+
+/// Every ABI function on `floats` (cycled into directions, wavelengths and
+/// uniforms); outputs must be finite and >= 0.
+fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), String> {
+    use stam::ffi::*;
+    let n = 4;
+    let at = |i: usize| -> f32 {
+        if floats.is_empty() {
+            0.5
+        } else {
+            floats[i % floats.len()]
+        }
+    };
+    let wi: Vec<f32> = (0..3 * n).map(at).collect();
+    let wo: Vec<f32> = (0..3 * n).map(|i| at(i + 3 * n)).collect();
+    let lam: Vec<f32> = (0..n).map(|i| at(i + 6 * n)).collect();
+    let rnd: Vec<f32> = (0..3 * n).map(|i| at(i + 7 * n)).collect();
+    let mut out = vec![0f32; 3 * n];
+    let mut pdf = vec![0f32; n];
+    let mut coh = vec![0u8; n];
+    let check = |what: &str, v: &[f32]| -> Result<(), String> {
+        match v.iter().find(|x| !(x.is_finite() && **x >= 0.0)) {
+            Some(x) => Err(format!("{what} gave {x}")),
+            None => Ok(()),
+        }
+    };
+    unsafe {
+        stam_brdf_eval_spectral(
+            p,
+            n,
+            wi.as_ptr(),
+            wo.as_ptr(),
+            lam.as_ptr(),
+            out.as_mut_ptr(),
+        );
+        check("eval_spectral", &out[..n])?;
+        stam_brdf_eval_rgb(p, n, wi.as_ptr(), wo.as_ptr(), out.as_mut_ptr());
+        check("eval_rgb", &out)?;
+        stam_brdf_coherent_spectral(p, n, wi.as_ptr(), lam.as_ptr(), out.as_mut_ptr());
+        check("coherent_spectral", &out[..n])?;
+        stam_brdf_coherent_rgb(p, n, wi.as_ptr(), out.as_mut_ptr());
+        check("coherent_rgb", &out)?;
+        for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
+            stam_brdf_sample(
+                p,
+                n,
+                wi.as_ptr(),
+                lam_ptr,
+                rnd.as_ptr(),
+                out.as_mut_ptr(),
+                pdf.as_mut_ptr(),
+                coh.as_mut_ptr(),
+            );
+            check("sample pdf", &pdf)?;
+            for i in 0..n {
+                if pdf[i] > 0.0 {
+                    let w = &out[3 * i..3 * i + 3];
+                    let len = (w.iter().map(|x| (*x as f64).powi(2)).sum::<f64>()).sqrt();
+                    if !((len - 1.0).abs() < 1e-5) {
+                        return Err(format!("sample wo {w:?} is not unit (pdf {})", pdf[i]));
+                    }
+                }
+            }
+            stam_brdf_pdf(p, n, wi.as_ptr(), wo.as_ptr(), lam_ptr, pdf.as_mut_ptr());
+            check("pdf", &pdf)?;
+            stam_brdf_coherent_probability(p, n, wi.as_ptr(), lam_ptr, pdf.as_mut_ptr());
+            check("coherent_probability", &pdf)?;
+        }
+        let _ = stam_brdf_flags(p);
+        let _ = stam_brdf_memory_bytes(p);
+    }
+    Ok(())
+}
+
+fn any_float() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        4 => -2.0f32..2.0,
+        2 => 300.0f32..900.0,
+        1 => Just(f32::NAN),
+        1 => Just(f32::INFINITY),
+        1 => Just(f32::NEG_INFINITY),
+        1 => Just(0.0f32),
+        1 => Just(-0.0f32),
+        1 => Just(f32::MAX),
+        1 => Just(f32::MIN_POSITIVE / 4.0),
+        1 => any::<f32>(),
+    ]
+}
+
+/// A JSON number in text form, including the awkward ones.
+fn number() -> impl Strategy<Value = String> {
+    prop_oneof![
+        (-1e3f64..1e3).prop_map(|x| format!("{x}")),
+        (-300i32..300).prop_map(|e| format!("1e{e}")),
+        (0.0f64..1.0).prop_map(|x| format!("{x}")),
+        any::<i64>().prop_map(|x| format!("{x}")),
+        Just("1e400".to_string()),
+        Just("-0".to_string()),
+        Just("0".to_string()),
+        Just("123456789012345678901234567890".to_string()),
+        (1u32..70).prop_map(|x| format!("{x}")),
+        (1e-7f64..200.0).prop_map(|x| format!("{x}")),
+    ]
+}
+
+fn string_value() -> impl Strategy<Value = String> {
+    prop_oneof![
+        prop::sample::select(vec![
+            "gaussian",
+            "fractal",
+            "periodic",
+            "cd",
+            "rect",
+            "sine",
+            "aluminium",
+            "silver",
+            "gold",
+            "copper",
+            "chromium",
+            "",
+            "Gaussian",
+            "glass",
+        ])
+        .prop_map(|s| format!("\"{s}\"")),
+        "[a-z_\\\\\"\u{e9}\u{1F600}]{0,12}".prop_map(|s| serde_json::to_string(&s).unwrap()),
+    ]
+}
+
+fn key() -> impl Strategy<Value = String> {
+    prop_oneof![
+        6 => prop::sample::select(KEYS.to_vec()).prop_map(|s| s.to_string()),
+        1 => "[a-zA-Z_\u{e9}]{0,10}",
+    ]
+    .prop_map(|k| serde_json::to_string(&k).unwrap())
+}
+
+/// Any JSON value, nested to a small depth, biased to numbers and the
+/// known strings.
+fn value() -> impl Strategy<Value = String> {
+    let leaf = prop_oneof![
+        4 => number(),
+        3 => string_value(),
+        1 => Just("true".to_string()),
+        1 => Just("null".to_string()),
+    ];
+    leaf.prop_recursive(3, 24, 6, |inner| {
+        prop_oneof![
+            prop::collection::vec(inner.clone(), 0..6).prop_map(|v| format!("[{}]", v.join(","))),
+            prop::collection::vec((key(), inner), 0..4).prop_map(|kv| {
+                let items: Vec<String> = kv.iter().map(|(k, v)| format!("{k}:{v}")).collect();
+                format!("{{{}}}", items.join(","))
+            }),
+            prop::collection::vec(number(), 0..40)
+                .prop_map(|v| format!("{{\"heights_um\":[{}]}}", v.join(","))),
+        ]
+    })
+}
+
+/// A structurally valid JSON object, usually with a valid surface and some
+/// of its keys, so that validation goes deep.
+fn object() -> impl Strategy<Value = String> {
+    (
+        prop::option::weighted(
+            0.9,
+            prop::sample::select(vec!["gaussian", "fractal", "periodic", "cd"]),
+        ),
+        prop::collection::vec((key(), value()), 0..7),
+    )
+        .prop_map(|(surface, kv)| {
+            let mut items: Vec<String> = Vec::new();
+            if let Some(s) = surface {
+                items.push(format!("\"surface\":\"{s}\""));
+            }
+            items.extend(kv.iter().map(|(k, v)| format!("{k}:{v}")));
+            format!("{{{}}}", items.join(","))
+        })
+}
+
+/// A valid random material (the stress generator's) with 0 to 2 mutations:
+/// a key removed, a key set to a random value of any type, or a known key
+/// added.
+fn mutated_material() -> impl Strategy<Value = String> {
+    (
+        any::<u64>(),
+        0usize..7,
+        prop::collection::vec(
+            (0usize..3, any::<prop::sample::Index>(), key(), value()),
+            0..3,
+        ),
+    )
+        .prop_map(|(seed, kind, mutations)| {
+            let mut rng = stress::gen::Rng::new(seed);
+            let json = stress::gen::material(&mut rng, kind);
+            let serde_json::Value::Object(mut obj) = serde_json::from_str(&json).unwrap() else {
+                unreachable!()
+            };
+            for (what, index, key, value) in mutations {
+                let keys: Vec<String> = obj.keys().cloned().collect();
+                if keys.is_empty() {
+                    continue;
+                }
+                let existing = keys[index.index(keys.len())].clone();
+                let value: serde_json::Value =
+                    serde_json::from_str(&value).unwrap_or(serde_json::Value::Null);
+                match what {
+                    0 => {
+                        obj.remove(&existing);
+                    }
+                    1 => {
+                        obj.insert(existing, value);
+                    }
+                    _ => {
+                        obj.insert(serde_json::from_str::<String>(&key).unwrap(), value);
+                    }
+                }
+            }
+            serde_json::Value::Object(obj).to_string()
+        })
+}
+
+fn run_strategy<S: Strategy<Value = String>>(name: &str, strategy: S, cases: u32) {
+    let accepted = ACCEPTED.load(Ordering::Relaxed);
+    let refused = REFUSED.load(Ordering::Relaxed);
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig {
+        cases,
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    });
+    let floats = prop::collection::vec(any_float(), 0..40);
+    let result = runner.run(&(strategy, floats), |(text, floats)| {
+        exercise(&text, &floats).map_err(TestCaseError::fail)
+    });
+    println!(
+        "{name}: {cases} cases, accepted {}, refused {} (all refusals with a message naming a key or the JSON problem)",
+        ACCEPTED.load(Ordering::Relaxed) - accepted,
+        REFUSED.load(Ordering::Relaxed) - refused
+    );
+    if let Err(e) = result {
+        panic!("{name}: {e}");
+    }
+}
+
+/// Cases per strategy (env FUZZ_CASES overrides; CI uses the default).
+fn cases() -> u32 {
+    std::env::var("FUZZ_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3000)
+}
+
+#[test]
+fn fuzz_parameters_and_abi() {
+    run_strategy("arbitrary text", ".{0,200}", cases());
+    run_strategy(
+        "JSON-ish text",
+        "[{}\\[\\]\":,0-9.eE+\\-a-z_ ]{0,120}",
+        cases(),
+    );
+    run_strategy("structured JSON", object(), cases());
+    run_strategy("mutated valid materials", mutated_material(), cases());
+    // The on-success path must actually be reached, not only refusals.
+    assert!(ACCEPTED.load(Ordering::Relaxed) > 0);
+}
+
+/// Valid materials with random float inputs: the fuzzer's "on success" path
+/// must actually be reached, not only refusals.
+#[test]
+fn fuzz_reaches_accepted_materials() {
+    let accepted_before = ACCEPTED.load(Ordering::Relaxed);
+    for json in [
+        r#"{"surface":"cd"}"#,
+        r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2}"#,
+        r#"{"surface":"fractal","hurst":0.4,"sigma_um":0.1,"lag_um":1}"#,
+    ] {
+        exercise(json, &[0.1, 0.2, 0.9, f32::NAN, 500.0, -0.3, 0.7]).unwrap();
+    }
+    assert!(ACCEPTED.load(Ordering::Relaxed) >= accepted_before + 3);
+    println!(
+        "fuzz counts so far in this process: accepted {}, refused {}",
+        ACCEPTED.load(Ordering::Relaxed),
+        REFUSED.load(Ordering::Relaxed)
+    );
+}
+
+#[test]
+fn refusal_check_is_not_vacuous() {
+    assert!(!names_key_or_json_problem("something went wrong"));
+    assert!(names_key_or_json_problem(
+        "parameter 'sigma_um' = -1 is out of range"
+    ));
+    assert!(names_key_or_json_problem(
+        "parameters are not valid JSON: EOF"
+    ));
+}
