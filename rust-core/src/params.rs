@@ -308,7 +308,7 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<SurfaceParams, StamE
             ))
         })?,
     };
-    let height = r.ranged("height_um", range::HEIGHT_UM, false, " um")?;
+    let height = r.ranged("height_um", range::HEIGHT_UM, true, " um")?;
     let width = r.ranged(
         "width_um",
         (0.0, period_um),

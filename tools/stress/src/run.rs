@@ -394,7 +394,7 @@ pub fn run(options: &Options) -> Report {
                 ffi::stam_brdf_coherent_probability(b, n, wi32.as_ptr(), lam_ptr, out.as_mut_ptr())
             };
             for (i, &p) in out.iter().enumerate() {
-                if !(p >= 0.0 && p <= 1.0) {
+                if !(0.0..=1.0).contains(&p) {
                     report.bad_coherent_probability += 1;
                     let w = ctx("coherent_probability", i)();
                     report.fail(format!("{w}: {p}"));
