@@ -38,7 +38,7 @@ fn material() -> impl Strategy<Value = String> {
         .prop_map(|(h, s, l)| {
             format!("\"surface\":\"fractal\",\"hurst\":{h},\"sigma_um\":{s},\"lag_um\":{l}")
         });
-    let periodic = (log_uniform(0.3, 100.0), 0.0f64..1.0, 0.0f64..1.0, 0.01f64..1.0, 0usize..3)
+    let periodic = (log_uniform(0.3, 100.0), 0.0f64..1.0, 0.001f64..1.0, 0.01f64..1.0, 0usize..3)
         .prop_map(|(period, coh_t, h, width_frac, kind)| {
             let coherence = (1.5 * period) * (5000.0 / (1.5 * period)).powf(coh_t);
             let profile = match kind {
