@@ -268,7 +268,7 @@ def test07_chi2_rgb(surface, wi_index):
 
 
 @pytest.mark.parametrize('surface,wi_index', [('gaussian', 1), ('gaussian', 2), ('fractal', 1),
-                                              ('fractal', 2), ('periodic_rect', 2)])
+                                              ('fractal', 2), ('periodic_rect', 1)])
 def test08_chi2_spectral(surface, wi_index):
     wi = WI_LIST[wi_index]
     """Sampling with a hero wavelength, pdf = mean over the four wavelengths."""
@@ -585,7 +585,8 @@ def test19_scalar_vs_llvm():
         # two code paths of the plugin (scalar, batched JIT) must agree.
         scene = scene_dict('gaussian')
         del scene['env']
-        img = to_np(mi.render(mi.load_dict(scene), spp=256, seed=1))
+        scene['integrator'] = {'type': 'direct'}
+        img = to_np(mi.render(mi.load_dict(scene), spp=1024, seed=1))
         means[v] = img.reshape(4, 4, 6, 4, 3).mean(axis=(1, 3))   # 4x6 blocks
     a, b = means['scalar_rgb'], means['llvm_ad_rgb']
     assert np.allclose(a.mean(), b.mean(), rtol=0.005)
