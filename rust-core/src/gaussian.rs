@@ -147,7 +147,7 @@ impl GaussianSurface {
             let k2 = k * k;
             let g = g0 * k2;
             let x = x0 * k2;
-            let s = if self.series.use_table && g < self.series.asymptotic_min_g {
+            let s = if self.series.use_table {
                 match series_table().lookup_parts(g, ln_g0 + 2.0 * ln_k, root_x0 * k) {
                     Some(s) => s,
                     None => poisson_series(g, x, &self.series),
@@ -174,15 +174,17 @@ pub fn poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
     if !(g > 0.0) || !(x >= 0.0) || !g.is_finite() || !x.is_finite() {
         return 0.0;
     }
+    if settings.use_table {
+        if let Some(s) = series_table().lookup(g, x) {
+            return s;
+        }
+    }
     if g >= settings.asymptotic_min_g {
         if let Some(s) = poisson_series_asymptotic(g, x) {
             return s;
         }
     }
     if settings.use_table {
-        if let Some(s) = series_table().lookup(g, x) {
-            return s;
-        }
         // The saddle rule's accuracy (~1e-5) is the table's.
         if let Some(s) = poisson_series_saddle(g, x) {
             return s;
@@ -191,10 +193,14 @@ pub fn poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
     poisson_series_exact(g, x, settings.tolerance)
 }
 
-/// ln S tabulated over (ln g, sqrt x): one universal function of two
-/// variables, so one table serves every Gaussian material. In sqrt(x) the far
-/// tail ln S ~ -2 sqrt(x ln(m/g)) is nearly linear, and near x = 0 ln S is
-/// even in sqrt(x): both interpolate well with Catmull-Rom bicubics.
+/// ln S tabulated over (ln g, rho), rho = sqrt(x / (1 + g)): one universal
+/// function of two variables, so one table serves every Gaussian material.
+/// For smooth surfaces (g << 1) rho ~ sqrt(x): the far tail ln S ~
+/// -2 sqrt(x ln(m/g)) is nearly linear in it and near x = 0 ln S is even in
+/// it. For rough ones rho^2 ~ x/g, the Beckmann exponent tan^2/alpha^2, in
+/// which ln S ~ -ln g - rho^2 is a gentle quadratic. Both interpolate well
+/// with Catmull-Rom bicubics. Rows above g = 40 are filled by the saddle-point
+/// rule (the exact sum would take O(sqrt g) terms per node).
 struct SeriesTable {
     ln_g_min: f64,
     inv_d_ln_g: f64,
@@ -205,7 +211,7 @@ struct SeriesTable {
 }
 
 const TABLE_G_MIN: f64 = 1e-4;
-const TABLE_G_MAX: f64 = 40.0;
+const TABLE_G_MAX: f64 = 1e4;
 const TABLE_D_LN_G: f64 = 0.08;
 const TABLE_ROOT_X_MAX: f64 = 60.0;
 const TABLE_D_ROOT_X: f64 = 0.05;
@@ -221,8 +227,14 @@ fn series_table() -> &'static SeriesTable {
         for i in 0..n_g {
             let g = (ln_g_min + (i as f64 - 1.0) * TABLE_D_LN_G).exp();
             for j in 0..n_root_x {
-                let r = (j as f64 - 1.0).abs() * TABLE_D_ROOT_X;
-                ln_s.push(poisson_series_exact(g, r * r, 1e-13).max(1e-300).ln());
+                let rho = (j as f64 - 1.0).abs() * TABLE_D_ROOT_X;
+                let x = rho * rho * (1.0 + g);
+                let s = if g > 40.0 {
+                    poisson_series_saddle(g, x).unwrap_or_else(|| poisson_series_exact(g, x, 1e-13))
+                } else {
+                    poisson_series_exact(g, x, 1e-13)
+                };
+                ln_s.push(s.max(1e-300).ln());
             }
         }
         SeriesTable {
@@ -258,11 +270,15 @@ impl SeriesTable {
     /// The same from g, ln g and sqrt(x) when the caller has them.
     #[inline]
     fn lookup_parts(&self, g: f64, ln_g: f64, root_x: f64) -> Option<f64> {
-        if !(TABLE_G_MIN..TABLE_G_MAX).contains(&g) || !(root_x < TABLE_ROOT_X_MAX) {
+        if !(TABLE_G_MIN..TABLE_G_MAX).contains(&g) {
+            return None;
+        }
+        let rho = root_x / (1.0 + g).sqrt();
+        if !(rho < TABLE_ROOT_X_MAX) {
             return None;
         }
         let fg = (ln_g - self.ln_g_min) * self.inv_d_ln_g + 1.0;
-        let fx = root_x * self.inv_d_root_x + 1.0;
+        let fx = rho * self.inv_d_root_x + 1.0;
         let ig = (fg as usize).clamp(1, self.n_g - 3);
         let ix = (fx as usize).clamp(1, self.n_root_x - 3);
         let wg = catmull_rom(fg - ig as f64);
