@@ -126,7 +126,7 @@ def main():
         f"**Error**: over {pairs} fixed direction pairs (half around the specular lobe, half uniform; "
         "the pairs of `benches/brdf.rs`), the worst (and mean) of |value - reference| divided by the "
         "reference's largest RGB channel (RGB) or by the reference (spectral); pairs whose reference "
-        "is below 1e-10 of the set's largest are skipped. Channels clamped at 0 on both sides, as the core does.",
+        "is below 1e-10 of the set's largest are skipped. Out-of-gamut colours are mapped into the gamut at constant luminance on both sides, as the core does.",
         "",
         f"**Cost**: criterion median ns per evaluation over the same pairs, divided by the "
         f"Cook-Torrance/Beckmann/Smith baseline timed in the same run: **{base:.1f} ns** this run. "

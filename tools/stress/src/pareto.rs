@@ -354,11 +354,11 @@ pub fn reference(model: &str, json: &str, pairs: &[(DVec3, DVec3, f64)]) -> Refe
             .iter()
             .map(|&(wi, wo, l)| brdf.eval_spectral(wi, wo, l))
             .collect(),
-        // The core clamps negative (out-of-gamut) channels to 0; so does the
-        // reference.
+        // The core maps out-of-gamut colours into the gamut at constant
+        // luminance (stam::brdf::gamut_map); so does the reference.
         rgb: pairs
             .iter()
-            .map(|&(wi, wo, _)| brdf.eval_rgb_reference(wi, wo, step).map(|c| c.max(0.0)))
+            .map(|&(wi, wo, _)| stam::brdf::gamut_map(brdf.eval_rgb_reference(wi, wo, step)))
             .collect(),
     }
 }
@@ -387,8 +387,9 @@ pub fn error(config: &Config, pairs: &[(DVec3, DVec3, f64)], reference: &Referen
         let e = if spectral {
             (v[0] - reference.spectral[i]).abs() / s
         } else {
+            let v = stam::brdf::gamut_map(v);
             (0..3)
-                .map(|c| (v[c].max(0.0) - reference.rgb[i][c]).abs() / s)
+                .map(|c| (v[c] - reference.rgb[i][c]).abs() / s)
                 .fold(0.0, f64::max)
         };
         worst = worst.max(e);
