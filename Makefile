@@ -41,7 +41,7 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo compare render-tool core plugin setup clean-plugin test test-rust test-python lint bench stress
+.PHONY: all demo compare render-tool core plugin setup clean-plugin test test-rust test-python lint bench bench-render stress
 all: plugin
 
 demo: setup plugin
@@ -91,6 +91,9 @@ test: setup lint test-rust test-python
 
 # ns per evaluation (docs/performance.md) and run time against error of every
 # accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
+bench-render:
+	$(PYTHON) scripts/bench_render.py --write docs/plugin_speed.md
+
 bench:
 	$(CARGO) bench -p stam-core --bench brdf
 	$(PYTHON) scripts/bench_table.py docs/performance.md
