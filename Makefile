@@ -91,7 +91,7 @@ test: setup lint test-rust test-python
 
 # ns per evaluation (docs/performance.md) and run time against error of every
 # accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
-bench-render:
+bench-render: plugin
 	$(PYTHON) scripts/bench_render.py --write docs/plugin_speed.md
 
 bench:
