@@ -1,25 +1,13 @@
 //! Special functions private to the fractal profile: complex ln Gamma, real
 //! digamma/trigamma, the Mellin transform of Phi_alpha and the two series.
 
-use crate::special::ln_gamma;
+use crate::special::{ln_gamma, LANCZOS_G7 as LANCZOS};
 use num_complex::Complex64 as C64;
 
 pub(crate) const LN_2: f64 = std::f64::consts::LN_2;
 pub(crate) const LN_PI: f64 = 1.144_729_885_849_400_2;
 pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
 pub(crate) const TWO_PI: f64 = std::f64::consts::TAU;
-
-const LANCZOS: [f64; 9] = [
-    0.999_999_999_999_809_9,
-    676.520_368_121_885_1,
-    -1_259.139_216_722_402_8,
-    771.323_428_777_653_1,
-    -176.615_029_162_140_6,
-    12.507_343_278_686_905,
-    -0.138_571_095_265_720_12,
-    9.984_369_578_019_572e-6,
-    1.505_632_735_149_311_6e-7,
-];
 
 /// ln Gamma(z) for complex z off the non-positive real axis, modulo 2 pi i
 /// (only exp of it is used). Upward recurrence to Re z >= 1.5, then Lanczos

@@ -71,30 +71,7 @@ pub enum RandomModel {
     Fbm { hurst: f64, s: f64, lag: f64 },
 }
 
-/// ln Gamma(x) for x > 0 (Lanczos, g = 7, 9 terms).
-pub fn ln_gamma(x: f64) -> f64 {
-    const C: [f64; 9] = [
-        0.999_999_999_999_809_9,
-        676.520_368_121_885_1,
-        -1_259.139_216_722_402_8,
-        771.323_428_777_653_1,
-        -176.615_029_162_140_6,
-        12.507_343_278_686_905,
-        -0.138_571_095_265_720_12,
-        9.984_369_578_019_572e-6,
-        1.505_632_735_149_311_6e-7,
-    ];
-    if x < 0.5 {
-        return (PI / (PI * x).sin()).ln() - ln_gamma(1.0 - x);
-    }
-    let x = x - 1.0;
-    let mut a = C[0];
-    let t = x + 7.5;
-    for (i, c) in C.iter().enumerate().skip(1) {
-        a += c / (x + i as f64);
-    }
-    0.5 * (2.0 * PI).ln() + (x + 0.5) * t.ln() - t + a.ln()
-}
+pub use stam::special::ln_gamma;
 
 impl RandomModel {
     /// Power spectrum S_h(K) (um^4), Fourier convention S = int C exp(-i K.r) d^2r.
