@@ -586,6 +586,13 @@ def report_markdown(results, args, total_s):
     for r in results:
         if r['check'] == 'spectral_vs_rgb':
             lines += ['## Compact disc: scalar_spectral vs scalar_rgb (white light)', '',
+                      'The paper\'s disc with a %g um coherence length (with the default '
+                      '50 um each pixel\'s spectrum is a ~1 nm spike that Mitsuba\'s random '
+                      'wavelengths rarely hit: ~1e5 spp would be needed for 3 %% noise). The '
+                      'spectral image is mapped into the sRGB gamut at constant luminance, '
+                      'per pixel, as the core maps its RGB output; its unmapped luminance '
+                      'differs by %+.2f %%. ' % (SPECTRAL_CHECK_COHERENCE_UM,
+                                                  100 * r['luminance_sum_err']) +
                       'Lit pixels: interior, luminance of the RGB render above 1 %% of its '
                       'maximum (%d pixels, %dx%d, %d spp). Gate: the mean over lit pixels '
                       'of each channel, spectral vs RGB, within 3 %%: %s -> **%s**. '
@@ -613,9 +620,11 @@ def report_markdown(results, args, total_s):
     if diag:
         lines += ['## Diagnosis (information): core RGB path vs spectral projection', '',
                   'Rust-only images, `eval_rgb` vs `eval_rgb_reference` (signed projection of '
-                  'the spectrum on linear sRGB, 2 nm); 48x48, 4 spp. The core clamps each '
-                  'evaluation to non-negative RGB; a near-monochromatic diffraction peak '
-                  'projects to out-of-gamut (partly negative) sRGB, so clamping adds light.', '',
+                  'the spectrum on linear sRGB, 2 nm); 48x48, 4 spp. A near-monochromatic '
+                  'diffraction peak projects to out-of-gamut (partly negative) sRGB; the core '
+                  'maps each evaluation into the gamut at constant luminance (desaturating '
+                  'towards grey), so the channels differ from the signed projection where '
+                  'colours are out of gamut while the luminance is kept.', '',
                   '| model | rel. RMSE | channel sums (R, G, B) | reference values < 0 |',
                   '|---|---|---|---|']
         for r in diag:
