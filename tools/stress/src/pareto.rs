@@ -233,7 +233,7 @@ pub fn configs() -> Vec<Config> {
                     push(
                         format!("rgb_nodes {nodes}"),
                         Mode::Rgb,
-                        nodes == default_nodes,
+                        nodes == stam::params::DEFAULT_RGB_NODES_FRACTAL,
                         with_nodes(json, nodes),
                         None,
                     );
