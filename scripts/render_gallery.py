@@ -32,7 +32,7 @@ GALLERY = [
      'Compact disc (Stam\'s dimensions)\nscalar_spectral',
      dict(res=256, spp=32), 99.7),
     ('cd_rgb', 'cd.xml', 'scalar_rgb',
-     'Compact disc, scalar_rgb\n(clamped out-of-gamut colours)',
+     'Compact disc, scalar_rgb\n(out-of-gamut colours gamut-mapped)',
      dict(res=256, spp=16), 99.7),
     ('grating', 'grating.xml', 'scalar_spectral',
      'Sine grating, 3 um, gold\nscalar_spectral',
