@@ -36,7 +36,9 @@ void stam_brdf_eval_spectral(const StamBrdf *b, size_t n, const float *wi, const
                              const float *lambda_nm, float *out);
 
 /* The same projected to linear sRGB (3 floats per pair), D65-weighted: a flat
- * spectrum maps to (1, 1, 1). */
+ * spectrum maps to (1, 1, 1). Colours purer than the sRGB primaries (the
+ * nearly monochromatic orders of gratings) are desaturated into the gamut at
+ * constant luminance, so every channel is >= 0 and Y is exact. */
 void stam_brdf_eval_rgb(const StamBrdf *b, size_t n, const float *wi, const float *wo,
                         float *out_rgb);
 
