@@ -39,10 +39,8 @@ const SERIES_MAX_TERMS: usize = 4096;
 pub const RGB_SAMPLING_NODES: usize = 4;
 /// Band of the RGB mixtures (outside it the sRGB weights are negligible).
 pub const RGB_BAND_NM: (f64, f64) = (380.0, 780.0);
-/// Wavelength bins of the grating rainbow (fewer for very many orders). 8
-/// bins cost 6 us per compact-disc sample against 16 us for 20, with the same
-/// variance within the measurement noise (examples/sampling_variance.rs).
-const RAINBOW_MAX_BINS: usize = 8;
+/// Wavelength bins of the grating rainbow (fewer for very many orders).
+const RAINBOW_MAX_BINS: usize = 20;
 const RAINBOW_MAX_CELLS: usize = 8192;
 /// Cap of the G / w^2 factor used in order weights (grazing orders).
 const GW2_CAP: f64 = 50.0;
