@@ -14,17 +14,7 @@ use stam::Brdf;
 use std::f64::consts::PI;
 use std::time::Instant;
 
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+use stam::benchmark::SplitMix64 as Rng;
 
 fn mean_var(xs: &[f64]) -> (f64, f64) {
     let n = xs.len() as f64;
@@ -94,7 +84,7 @@ fn main() {
                 let t0 = Instant::now();
                 let mut samples = Vec::with_capacity(n);
                 for _ in 0..n {
-                    samples.push(brdf.sample(wi, mode, [rng.next(), rng.next(), rng.next()]));
+                    samples.push(brdf.sample(wi, mode, rng.three()));
                 }
                 let ns_sample = t0.elapsed().as_nanos() as f64 / n as f64;
                 let t1 = Instant::now();
@@ -118,7 +108,7 @@ fn main() {
                 }
                 let mut cos = Vec::with_capacity(n);
                 for _ in 0..n {
-                    let (r1, r2) = (rng.next(), rng.next());
+                    let (r1, r2) = (rng.next_f64(), rng.next_f64());
                     let r = r1.sqrt();
                     let phi = 2.0 * PI * r2;
                     let wo = DVec3::new(r * phi.cos(), r * phi.sin(), (1.0 - r1).max(1e-12).sqrt());

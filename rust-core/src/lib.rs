@@ -9,6 +9,7 @@
 // values; the negated comparisons are deliberate.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod benchmark;
 pub mod brdf;
 pub mod error;
 pub mod ffi;

@@ -909,20 +909,7 @@ mod tests {
     use super::*;
 
     /// SplitMix64: deterministic uniforms for reproducible tests.
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            z ^= z >> 31;
-            (z >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn three(&mut self) -> [f64; 3] {
-            [self.next(), self.next(), self.next()]
-        }
-    }
+    use crate::benchmark::SplitMix64 as Rng;
 
     fn material(json: &str) -> Brdf {
         Brdf::from_json(json).unwrap_or_else(|e| panic!("{json}: {}", e.message))
@@ -1410,14 +1397,14 @@ mod tests {
         ] {
             let brdf = material(json);
             for _ in 0..300 {
-                let cos_t = 0.02 + 0.98 * rng.next();
-                let phi = 2.0 * PI * rng.next();
+                let cos_t = 0.02 + 0.98 * rng.next_f64();
+                let phi = 2.0 * PI * rng.next_f64();
                 let sin_t = (1.0 - cos_t * cos_t).sqrt();
                 let wi = DVec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
-                let mode = if rng.next() < 0.5 {
+                let mode = if rng.next_f64() < 0.5 {
                     None
                 } else {
-                    Some(380.0 + 400.0 * rng.next())
+                    Some(380.0 + 400.0 * rng.next_f64())
                 };
                 let s = brdf.sample(wi, mode, rng.three());
                 assert!(s.pdf.is_finite() && s.pdf >= 0.0 && s.wo.is_finite());
@@ -1470,8 +1457,8 @@ mod tests {
     fn pdf_positive_where_brdf_is() {
         let mut rng = Rng(7);
         let dir = |rng: &mut Rng| {
-            let cos_t = 1e-3 + (1.0 - 1e-3) * rng.next();
-            let phi = 2.0 * PI * rng.next();
+            let cos_t = 1e-3 + (1.0 - 1e-3) * rng.next_f64();
+            let phi = 2.0 * PI * rng.next_f64();
             let sin_t = (1.0 - cos_t * cos_t).sqrt();
             DVec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
         };
@@ -1489,7 +1476,7 @@ mod tests {
             let brdf = material(json);
             for _ in 0..400 {
                 let (wi, wo) = (dir(&mut rng), dir(&mut rng));
-                let lambda = 380.0 + 400.0 * rng.next();
+                let lambda = 380.0 + 400.0 * rng.next_f64();
                 if brdf.eval_spectral(wi, wo, lambda) > 0.0 {
                     positive += 1;
                     assert!(
@@ -1604,11 +1591,15 @@ mod tests {
             let mut lambda = Vec::new();
             let mut rnd = Vec::new();
             for _ in 0..n {
-                let cos_t = 0.05 + 0.95 * rng.next() as f32;
+                let cos_t = 0.05 + 0.95 * rng.next_f64() as f32;
                 let sin_t = (1.0 - cos_t * cos_t).sqrt();
                 wi.extend([sin_t, 0.0, cos_t]);
-                lambda.push(400.0 + 300.0 * rng.next() as f32);
-                rnd.extend([rng.next() as f32, rng.next() as f32, rng.next() as f32]);
+                lambda.push(400.0 + 300.0 * rng.next_f64() as f32);
+                rnd.extend([
+                    rng.next_f64() as f32,
+                    rng.next_f64() as f32,
+                    rng.next_f64() as f32,
+                ]);
             }
             for spectral in [true, false] {
                 let lp = if spectral {

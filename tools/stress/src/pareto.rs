@@ -21,10 +21,8 @@
 
 use glam::DVec3;
 use stam::brdf::Surface;
-use stam::fresnel::conductor_reflectance;
 use stam::gaussian::SeriesSettings;
 use stam::Brdf;
-use std::f64::consts::PI;
 
 /// Direction pairs of the survey (timing and error).
 pub const PAIRS: usize = 256;
@@ -271,61 +269,12 @@ pub fn configs() -> Vec<Config> {
     out
 }
 
-/// Deterministic direction pairs and wavelengths (benches/brdf.rs's
-/// generator): half around the mirror direction, half uniform.
+/// Deterministic direction pairs and wavelengths: those of benches/brdf.rs.
 pub fn directions() -> Vec<(DVec3, DVec3, f64)> {
-    let mut state: u64 = 7;
-    let mut next = move || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((state >> 11) as f64) / ((1u64 << 53) as f64)
-    };
-    (0..PAIRS)
-        .map(|i| {
-            let ct = 0.1 + 0.9 * next();
-            let phi = 2.0 * PI * next();
-            let st = (1.0 - ct * ct).sqrt();
-            let wi = DVec3::new(st * phi.cos(), st * phi.sin(), ct);
-            let wo = if i % 2 == 0 {
-                let jitter = DVec3::new(0.3 * (next() - 0.5), 0.3 * (next() - 0.5), 0.0);
-                (DVec3::new(-wi.x, -wi.y, wi.z) + jitter).normalize()
-            } else {
-                let ct = 0.05 + 0.95 * next();
-                let phi = 2.0 * PI * next();
-                let st = (1.0 - ct * ct).sqrt();
-                DVec3::new(st * phi.cos(), st * phi.sin(), ct)
-            };
-            let lambda = 380.0 + 400.0 * next();
-            (wi, wo, lambda)
-        })
-        .collect()
+    stam::benchmark::direction_pairs(7, PAIRS)
 }
 
-/// Cook-Torrance with a Beckmann distribution, Smith shadowing and the
-/// core's conductor Fresnel (benches/brdf.rs's baseline).
-#[inline]
-pub fn cook_torrance_beckmann(wi: DVec3, wo: DVec3, alpha: f64, eta: f64, k: f64) -> f64 {
-    if wi.z <= 0.0 || wo.z <= 0.0 {
-        return 0.0;
-    }
-    let h = (wi + wo).normalize();
-    let cos2 = h.z * h.z;
-    let tan2 = (1.0 - cos2) / cos2;
-    let a2 = alpha * alpha;
-    let d = (-tan2 / a2).exp() / (PI * a2 * cos2 * cos2);
-    let smith_g1 = |w: DVec3| {
-        let tan = (1.0 - w.z * w.z).max(0.0).sqrt() / w.z;
-        let a = 1.0 / (alpha * tan);
-        if a >= 1.6 {
-            1.0
-        } else {
-            (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
-        }
-    };
-    let f = conductor_reflectance(wi.dot(h), eta, k);
-    f * d * smith_g1(wi) * smith_g1(wo) / (4.0 * wi.z * wo.z)
-}
+pub use stam::benchmark::cook_torrance_beckmann;
 
 /// The reference material of a survey material: exact series at 1e-13.
 pub fn reference_brdf(json: &str) -> Brdf {

@@ -1,0 +1,83 @@
+//! Fixtures shared by the benchmarks (benches/brdf.rs), the run-time/error
+//! survey (tools/stress) and the sampling measurements: one deterministic set
+//! of direction pairs and the Cook-Torrance baseline, so that every ratio in
+//! the docs is against the same work.
+
+use crate::fresnel::conductor_reflectance;
+use glam::DVec3;
+use std::f64::consts::PI;
+
+/// SplitMix64: small, deterministic uniforms in [0, 1).
+pub struct SplitMix64(pub u64);
+
+impl SplitMix64 {
+    pub fn next_f64(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Three uniforms: the `rnd` of one BRDF sample.
+    pub fn three(&mut self) -> [f64; 3] {
+        [self.next_f64(), self.next_f64(), self.next_f64()]
+    }
+}
+
+/// `count` deterministic (wi, wo, lambda_nm) triples: half around the mirror
+/// direction (where renders spend their evaluations), half uniform over the
+/// hemisphere, wavelengths uniform over 380-780 nm.
+pub fn direction_pairs(seed: u64, count: usize) -> Vec<(DVec3, DVec3, f64)> {
+    let mut state = seed;
+    let mut next = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64) / ((1u64 << 53) as f64)
+    };
+    (0..count)
+        .map(|i| {
+            let ct = 0.1 + 0.9 * next();
+            let phi = 2.0 * PI * next();
+            let st = (1.0 - ct * ct).sqrt();
+            let wi = DVec3::new(st * phi.cos(), st * phi.sin(), ct);
+            let wo = if i % 2 == 0 {
+                let jitter = DVec3::new(0.3 * (next() - 0.5), 0.3 * (next() - 0.5), 0.0);
+                (DVec3::new(-wi.x, -wi.y, wi.z) + jitter).normalize()
+            } else {
+                let ct = 0.05 + 0.95 * next();
+                let phi = 2.0 * PI * next();
+                let st = (1.0 - ct * ct).sqrt();
+                DVec3::new(st * phi.cos(), st * phi.sin(), ct)
+            };
+            let lambda = 380.0 + 400.0 * next();
+            (wi, wo, lambda)
+        })
+        .collect()
+}
+
+/// Cook-Torrance with a Beckmann distribution, Smith shadowing and the same
+/// conductor Fresnel as the core: the baseline a renderer already pays for.
+pub fn cook_torrance_beckmann(wi: DVec3, wo: DVec3, alpha: f64, eta: f64, k: f64) -> f64 {
+    if wi.z <= 0.0 || wo.z <= 0.0 {
+        return 0.0;
+    }
+    let h = (wi + wo).normalize();
+    let cos2 = h.z * h.z;
+    let tan2 = (1.0 - cos2) / cos2;
+    let a2 = alpha * alpha;
+    let d = (-tan2 / a2).exp() / (PI * a2 * cos2 * cos2);
+    let smith_g1 = |w: DVec3| {
+        let tan = (1.0 - w.z * w.z).max(0.0).sqrt() / w.z;
+        let a = 1.0 / (alpha * tan);
+        if a >= 1.6 {
+            1.0
+        } else {
+            (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
+        }
+    };
+    let f = conductor_reflectance(wi.dot(h), eta, k);
+    f * d * smith_g1(wi) * smith_g1(wo) / (4.0 * wi.z * wo.z)
+}
