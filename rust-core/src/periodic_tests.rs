@@ -588,7 +588,10 @@ fn memory_is_bounded() {
     }
 }
 
+// A measurement, not a check (it asserts nothing): speed is benchmarked by
+// `make bench`; run it with `cargo test -p stam-core -- --ignored timing_spectral_kernel --nocapture`.
 #[test]
+#[ignore = "measurement; run with --ignored"]
 fn timing_spectral_kernel() {
     let surfaces = [
         ("cd l=20", cd(20.0)),
@@ -737,7 +740,10 @@ fn rgb_matches_fine_reference() {
     }
 }
 
+// A measurement, not a check (it asserts nothing): speed is benchmarked by
+// `make bench`; run it with `cargo test -p stam-core -- --ignored timing_rgb_kernel --nocapture`.
 #[test]
+#[ignore = "measurement; run with --ignored"]
 fn timing_rgb_kernel() {
     let surfaces = [
         ("cd l=3.75", cd(3.75)),
