@@ -40,6 +40,9 @@ pub struct Brdf {
     pub fresnel: Fresnel,
     /// Wavelength rule of the RGB path for spectrally smooth surfaces.
     rgb_rule: RgbRule,
+    /// Unique per material built in this process: keys the per-thread cache
+    /// of sampling strategies (an address could be reused after a free).
+    pub(crate) id: u64,
 }
 
 /// Cosine bins of the Fresnel-weighted RGB rule.
@@ -193,11 +196,13 @@ impl Brdf {
         } else {
             RgbRule::new(node_count, &params.fresnel)
         };
+        static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         Ok(Brdf {
             fresnel: params.fresnel.clone(),
             params,
             surface,
             rgb_rule,
+            id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
     }
 
