@@ -2,7 +2,7 @@
 //! sampling against cosine-weighted sampling, at the same sample count, and
 //! the cost per sample beside the cost per evaluation.
 //!
-//!   cargo run --release -p stam-core --example sampling_variance
+//!   cargo run --release -p stam-core --example sampling_variance [samples] [material filter]
 //!
 //! Estimator per sample: f cos / pdf, plus, for the coherent lobe, its
 //! reflectance / its probability when the sampler picks it. The cosine
@@ -28,6 +28,8 @@ fn main() {
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(200_000);
+    // Only materials whose name contains this text (all when absent).
+    let filter = std::env::args().nth(2).unwrap_or_default();
     let materials = [
         ("compact disc", r#"{"surface":"cd","fresnel":0.9}"#),
         (
@@ -66,6 +68,9 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for (name, json) in materials {
+        if !name.contains(filter.as_str()) {
+            continue;
+        }
         let brdf = Brdf::from_json(json).expect("material");
         for (inc_name, deg) in incidences {
             let th = deg.to_radians();

@@ -43,6 +43,9 @@ pub struct Brdf {
     /// Unique per material built in this process: keys the per-thread cache
     /// of sampling strategies (an address could be reused after a free).
     pub(crate) id: u64,
+    /// Diffuse albedo table of the sampling strategy (isotropic Gaussian
+    /// surfaces), built on the first sample.
+    pub(crate) sampling_albedo: std::sync::OnceLock<crate::sampling::AlbedoTable>,
 }
 
 /// Cosine bins of the Fresnel-weighted RGB rule.
@@ -203,6 +206,7 @@ impl Brdf {
             surface,
             rgb_rule,
             id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            sampling_albedo: std::sync::OnceLock::new(),
         })
     }
 
@@ -224,6 +228,7 @@ impl Brdf {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Brdf>()
             + self.rgb_rule.memory_bytes()
+            + self.sampling_albedo.get().map_or(0, |t| t.memory_bytes())
             + match &self.surface {
                 Surface::Gaussian(_) => 0,
                 Surface::Fractal(f) => f.memory_bytes(),
