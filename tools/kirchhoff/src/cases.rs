@@ -36,7 +36,7 @@ pub const CI: Budget = Budget {
     min_realisations: 64,
     max_realisations: 1000,
     calib_realisations: 16,
-    fbm_per_rc: 12.0,
+    fbm_per_rc: 16.0,
 };
 
 fn realisations(b: &Budget, grid: &Grid) -> usize {
@@ -94,6 +94,7 @@ pub fn gaussian_case(
         lambda0_nm: LAMBDA0_NM,
         binning,
         seed,
+        fbm_completion: Default::default(),
     }
 }
 
@@ -128,11 +129,16 @@ pub fn fbm_case(
             edges: log_edges(0.5 * d, q_max, 18),
         },
         seed,
+        fbm_completion: Default::default(),
     }
 }
 
 pub fn full_random() -> Vec<RandomCase> {
-    let b = &FULL;
+    full_random_with(&FULL)
+}
+
+/// The full case list with another budget (experiments: `--fbm-per-rc`).
+pub fn full_random_with(b: &Budget) -> Vec<RandomCase> {
     let mut v = Vec::new();
     let mut seed = 1000;
     for &th in &[0.0, 40.0] {

@@ -13,6 +13,15 @@
 //! remains is aliasing of the spectrum beyond Nyquist; it is measured as the
 //! "floor" = mean |P|^2/A in the band max(|qx|/qnx, |qy|/qny) >= 0.9, and a bin
 //! counts as resolved only if it is 100x above it.
+//!
+//! Exact expectation: for Gaussian heights the estimator's mean is known
+//! without Monte Carlo, E|P_m|^2 / A = dx^2 FFT_m[exp(-a^2 D(r) / 2)] with D
+//! from the synthesis' ensemble covariance (`BinResult::expected_gt`). It
+//! checks the Monte Carlo (GT vs E[GT] with the covariance between bins) and
+//! separates Monte Carlo noise from deterministic differences (core / E[GT]).
+//! Fractal surfaces are completed to the exact target structure function
+//! (`FbmCompletion::Exact`) and the aliasing of the sampled transform is
+//! corrected with the same transform on a 4x finer grid.
 
 use crate::fft2::Fft2;
 use crate::optics::{self, Pair};
@@ -51,6 +60,30 @@ pub struct RandomCase {
     pub lambda0_nm: f64,
     pub binning: Binning,
     pub seed: u64,
+    /// fBm only: how the torus surfaces are completed to the target power
+    /// law (see `FbmCompletion`).
+    pub fbm_completion: FbmCompletion,
+}
+
+/// How the fractal ground truth accounts for what the torus synthesis cannot
+/// hold (wavenumbers below 2 pi / L, the missing zero mode, everything beyond
+/// Nyquist). Both are exact averages over an independent Gaussian complement
+/// added to every surface, applied by multiplying the circular
+/// autocorrelation of p by the complement's characteristic function.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum FbmCompletion {
+    /// The complement has the structure function
+    /// dD(r) = s^2 (r / lag)^(2H) - D_disc(r) at every torus lag (D_disc from
+    /// the synthesis' exact ensemble covariance): the estimator's expectation
+    /// is exactly dx^2 sum_r exp(-a^2 s^2 (r/lag)^(2H) / 2) exp(-i q.r) for
+    /// the *target* s; no fit. The core is evaluated with the target s.
+    #[default]
+    Exact,
+    /// The earlier method: a random plane (slope variance B) and a white
+    /// nugget C0 fitted with s over lags [r_c/8, 4 r_c]; the core with the
+    /// fitted s. Biased by up to 0.3% (H = 0.9, dx = r_c/16) and 1.5%
+    /// (dx = r_c/32, smaller torus) at the highest compared q.
+    FittedPlane,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -67,6 +100,20 @@ pub struct BinResult {
     pub core: f64,
     pub beckmann: f64,
     pub first_order: f64,
+    /// Exact expectation of the Monte Carlo estimator for the synthesised
+    /// process (no Monte Carlo noise): dx^2 FFT of the lag function
+    /// exp(-a^2 D_disc(r) / 2) (x the completion factor for fBm; before the
+    /// aliasing correction `alias`).
+    pub expected: f64,
+    /// fBm only: the torus transform of the power law sampled 4x finer,
+    /// (dx/4)^2 sum_r exp(-a^2 s^2 (r/lag)^(2H) / 2) exp(-i q.r), with the s
+    /// the core is given (0 otherwise): the continuum up to aliasing
+    /// ~ (q dx / 4)^(2+2H).
+    pub power_law: f64,
+    /// fBm with `FbmCompletion::Exact`: the aliasing correction already
+    /// subtracted from `gt`: (the same transform sampled at dx) - `power_law`
+    /// (0 otherwise). E[gt] = expected - alias.
+    pub alias: f64,
 }
 
 impl BinResult {
@@ -75,6 +122,10 @@ impl BinResult {
     }
     pub fn rel_err(&self) -> f64 {
         self.gt_se / self.gt
+    }
+    /// The exact expectation of `gt` (no Monte Carlo noise).
+    pub fn expected_gt(&self) -> f64 {
+        self.expected - self.alias
     }
 }
 
@@ -96,6 +147,14 @@ pub struct RandomResult {
     pub calibration: Calibration,
     pub floor: f64,
     pub bins: Vec<BinResult>,
+    /// Chi-square of core - GT over the resolved bins with the full Monte
+    /// Carlo covariance between bins (neighbouring bins share realisations
+    /// and are strongly correlated, most of all for fBm), and its dof.
+    pub chi2_cov: f64,
+    pub chi2_cov_dof: usize,
+    /// The same for expected - GT (the Monte Carlo against the exact
+    /// expectation of its estimator: must be pure noise).
+    pub chi2_cov_expected: f64,
     pub seconds: f64,
 }
 
@@ -410,8 +469,15 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
             let (s_ens, b, c0, resid) = fit_fbm(&ens, &fit_x, hurst, lag, FBM_FIT_TERMS);
             let (s_pure, _, _, resid_pure) = fit_fbm(&ens, &fit_x, hurst, lag, 1);
             let h_eff = fit_slope(&ens, &fit_x);
-            plane_b = b.max(0.0);
-            nugget = c0.max(0.0);
+            if case.fbm_completion == FbmCompletion::FittedPlane {
+                plane_b = b.max(0.0);
+                nugget = c0.max(0.0);
+                model_for_core = RandomModel::Fbm {
+                    hurst,
+                    s: s_ens,
+                    lag,
+                };
+            }
             calibration
                 .entries
                 .push(("s_um (fit with plane)".into(), s, s_ens, 0.0, 0.0));
@@ -448,11 +514,33 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
                 0.0,
                 0.0,
             ));
-            model_for_core = RandomModel::Fbm {
-                hurst,
-                s: s_ens,
-                lag,
-            };
+            // The exact complement dD = D_target - D_disc: its size at r_c
+            // (as a^2 dD / 2) and its smallest value relative to D_target
+            // over the torus lags (>= 0: a genuine, non-negative complement).
+            let (mut at_rc, mut min_rel) = (0.0, f64::INFINITY);
+            for &(j, r) in &fit_x {
+                if (r - rc).abs() <= 0.5 * g.dx {
+                    at_rc = 0.5
+                        * a
+                        * a
+                        * (s * s * (r / lag).powf(2.0 * hurst) - 2.0 * (ens[0] - ens[j]));
+                }
+            }
+            for j in 1..g.len() {
+                let (rx, ry) = g.lag(j % g.nx, j / g.nx);
+                let dt = s * s * (rx.hypot(ry) / lag).powf(2.0 * hurst);
+                min_rel = f64::min(min_rel, (dt - 2.0 * (ens[0] - ens[j])) / dt);
+            }
+            calibration
+                .entries
+                .push(("complement a^2 dD(r_c) / 2".into(), 0.0, at_rc, 0.0, 0.0));
+            calibration.entries.push((
+                "complement min dD / D_target".into(),
+                0.0,
+                min_rel,
+                0.0,
+                0.0,
+            ));
         }
     }
     let json = core_json(&model_for_core);
@@ -495,15 +583,28 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
         })
         .collect();
     let mut acc = Accum::new(nb);
+    // Per-realisation bin values (for the covariance between bins).
+    let mut series: Vec<Vec<f64>> = vec![Vec::with_capacity(case.realisations); nb];
     let mut floor_sum = 0.0;
     let mut p0: Vec<Complex64> = Vec::with_capacity(case.realisations);
     let mut calib_vals: Vec<Vec<f64>> = vec![Vec::new(); 3];
-    // Fractal: the random plane of slope variance B, averaged exactly, by
+    // Fractal, `FbmCompletion::FittedPlane`: the random plane of slope variance B, averaged exactly, by
     // multiplying the circular autocorrelation of p by its characteristic
     // function exp(-a^2 B r^2 / 2) (r the torus lag); the variance C0 missing
     // beyond Nyquist by exp(-a^2 C0 / 2) (its broad pedestal, of order
     // (a^2 C0 / 2) dx^2 / pi^2 at low q, is neglected).
-    let plane_factor: Vec<f64> = if plane_b > 0.0 || nugget > 0.0 {
+    let plane_factor: Vec<f64> = if let (RandomModel::Fbm { hurst, s, lag }, FbmCompletion::Exact) =
+        (case.model, case.fbm_completion)
+    {
+        // The exact complement: exp(-a^2 (D_target(r) - D_disc(r)) / 2).
+        (0..g.len())
+            .map(|j| {
+                let (rx, ry) = g.lag(j % g.nx, j / g.nx);
+                let dt = s * s * (rx.hypot(ry) / lag).powf(2.0 * hurst);
+                (-0.5 * a * a * (dt - 2.0 * (ens[0] - ens[j]))).exp()
+            })
+            .collect()
+    } else if plane_b > 0.0 || nugget > 0.0 {
         (0..g.len())
             .map(|j| {
                 let (rx, ry) = g.lag(j % g.nx, j / g.nx);
@@ -513,6 +614,57 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
     } else {
         Vec::new()
     };
+    // Exact expectation of the estimator below: E[circular autocorrelation
+    // of p](r) = exp(-a^2 (C(0) - C(r))) for the Gaussian process with the
+    // ensemble covariance C of the synthesis, then the same completion
+    // factor and transform as the Monte Carlo. Gaussian q = 0: the coherent
+    // |E P_0|^2 / A = dx^2 N exp(-a^2 C(0)) removed.
+    let lag_transform = |fft: &mut Fft2, f: &dyn Fn(usize) -> f64| -> Vec<f64> {
+        let mut b: Vec<Complex64> = (0..g.len()).map(|j| Complex64::new(f(j), 0.0)).collect();
+        fft.forward(&mut b);
+        b.iter().map(|z| z.re * g.dx * g.dx).collect()
+    };
+    let coherent = match case.model {
+        RandomModel::Gaussian { .. } => (-a * a * ens[0]).exp(),
+        RandomModel::Fbm { .. } => 0.0,
+    };
+    let expected_pt = lag_transform(&mut fft, &|j| {
+        let r = (-a * a * (ens[0] - ens[j])).exp() - coherent;
+        if plane_factor.is_empty() {
+            r
+        } else {
+            r * plane_factor[j]
+        }
+    });
+    // fBm: the same transform of the target power law on a 4x finer grid
+    // (same torus), and, with the exact completion, the aliasing correction
+    // (sampled at dx) - (sampled at dx/4), subtracted from the Monte Carlo.
+    let (power_law_pt, alias_pt) = match model_for_core {
+        RandomModel::Fbm { hurst, s, lag } => {
+            let fine = fine_power_law(&g, a, hurst, s, lag, 4);
+            let alias = if case.fbm_completion == FbmCompletion::Exact {
+                let coarse = lag_transform(&mut fft, &|j| {
+                    let (rx, ry) = g.lag(j % g.nx, j / g.nx);
+                    (-0.5 * a * a * s * s * (rx.hypot(ry) / lag).powf(2.0 * hurst)).exp()
+                });
+                coarse.iter().zip(&fine).map(|(c, f)| c - f).collect()
+            } else {
+                vec![0.0; g.len()]
+            };
+            (fine, alias)
+        }
+        RandomModel::Gaussian { .. } => (vec![0.0; g.len()], vec![0.0; g.len()]),
+    };
+    let mut expected_sum = vec![0.0; nb];
+    let mut power_law_sum = vec![0.0; nb];
+    let mut alias_sum = vec![0.0; nb];
+    for (j, &b) in map.of_point.iter().enumerate() {
+        if b != usize::MAX {
+            expected_sum[b] += expected_pt[j];
+            power_law_sum[b] += power_law_pt[j];
+            alias_sum[b] += alias_pt[j];
+        }
+    }
     let mut power = vec![0.0; g.len()];
     let mut power0: Vec<f64> = Vec::with_capacity(case.realisations);
     let scale = g.dx * g.dx / g.len() as f64;
@@ -570,10 +722,11 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
                     acc.per_real[b] += pw;
                 }
             }
-            for b in 0..nb {
+            for (b, ser) in series.iter_mut().enumerate() {
                 let x = acc.per_real[b] / map.bins[b].points.max(1) as f64;
                 acc.sum[b] += x;
                 acc.sum2[b] += x * x;
+                ser.push(x);
             }
             acc.n += 1;
             floor_sum += floor_pts.iter().map(|&j| power[j]).sum::<f64>() / floor_pts.len() as f64;
@@ -617,13 +770,23 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
         bin.lambda_nm /= n;
         bin.theta_o_deg /= n;
         let (m, se) = acc.mean_se(b);
-        bin.gt = m;
+        bin.alias = alias_sum[b] / bin.points as f64;
+        bin.gt = m - bin.alias;
         bin.gt_se = se;
         bin.core = core_sum[b] / n;
         bin.beckmann = beck_sum[b] / n;
         bin.first_order = first_sum[b] / n;
+        bin.expected = expected_sum[b] / n;
+        bin.power_law = power_law_sum[b] / n;
     }
-    let mut bins: Vec<BinResult> = map.bins.into_iter().filter(|b| b.points > 0).collect();
+    let mut bins: Vec<BinResult> = Vec::new();
+    let mut bin_series: Vec<Vec<f64>> = Vec::new();
+    for (bin, ser) in map.bins.into_iter().zip(series) {
+        if bin.points > 0 {
+            bins.push(bin);
+            bin_series.push(ser);
+        }
+    }
     // q = 0: variance of P_0 over realisations / A (the coherent |<P_0>|^2 removed).
     let area = g.lx() * g.ly();
     let n = p0.len() as f64;
@@ -632,12 +795,13 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
         .iter()
         .map(|z| (z - mean0).norm_sqr() / area * n / (n - 1.0))
         .collect();
-    let (v0, v0_se) = if plane_factor.is_empty() {
-        mean_se(&dev)
+    let ser0 = if plane_factor.is_empty() {
+        dev
     } else {
         // Fractal: no coherent part; the plane-corrected power at q = 0.
-        mean_se(&power0)
+        power0
     };
+    let (v0, v0_se) = mean_se(&ser0);
     let mut bin0 = BinResult {
         cut: "q0".into(),
         q: 0.0,
@@ -645,9 +809,12 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
         lambda_nm: pair0.lambda_nm,
         theta_o_deg: pair0.wo.z.acos().to_degrees(),
         points: 1,
-        gt: v0,
+        gt: v0 - alias_pt[0],
         gt_se: v0_se,
+        alias: alias_pt[0],
         core: core0,
+        expected: expected_pt[0],
+        power_law: power_law_pt[0],
         ..Default::default()
     };
     if let RandomModel::Gaussian { sigma, tx, ty } = case.model {
@@ -655,6 +822,22 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
         bin0.first_order = optics::first_order_spectrum(sigma, tx, ty, a, 0.0, 0.0);
     }
     bins.insert(0, bin0);
+    bin_series.insert(0, ser0);
+    let floor = floor_sum / acc.n as f64;
+    let resolved: Vec<usize> = (0..bins.len())
+        .filter(|&i| verdict(&bins[i], floor).resolved)
+        .collect();
+    let diff: Vec<f64> = resolved
+        .iter()
+        .map(|&i| bins[i].core - bins[i].gt)
+        .collect();
+    let sel: Vec<&[f64]> = resolved.iter().map(|&i| bin_series[i].as_slice()).collect();
+    let (chi2_cov, chi2_cov_dof) = covariance_chi2(&sel, &diff);
+    let diff_e: Vec<f64> = resolved
+        .iter()
+        .map(|&i| bins[i].expected_gt() - bins[i].gt)
+        .collect();
+    let (chi2_cov_expected, _) = covariance_chi2(&sel, &diff_e);
     let roughness = match case.model {
         RandomModel::Gaussian { sigma, .. } => (sigma * a).powi(2),
         RandomModel::Fbm { s, .. } => a * a * s * s / 2.0,
@@ -665,10 +848,144 @@ pub fn run(case: &RandomCase, core_scale: f64) -> Result<RandomResult, String> {
         core_json: json,
         core_route: brdf.route(),
         calibration,
-        floor: floor_sum / acc.n as f64,
+        floor,
         bins,
+        chi2_cov,
+        chi2_cov_dof,
+        chi2_cov_expected,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Chi-square of the differences `d` (one per bin) with the covariance S of
+/// the means of the per-realisation series (one per bin, equal lengths n).
+/// S is scaled to a correlation matrix and diagonalised (Jacobi); directions
+/// with eigenvalue below 1e-6 of the largest are dropped (bins so strongly
+/// correlated that the sample covariance cannot resolve their difference).
+/// Returns (chi2, dof): chi2 = sum over the kept directions of (v.d)^2 / lambda,
+/// times (n - p - 2) / (n - 1) so that E chi2 = dof for pure Monte Carlo
+/// noise (Hotelling). (0, 0) when there are no bins or too few realisations.
+pub fn covariance_chi2(series: &[&[f64]], d: &[f64]) -> (f64, usize) {
+    let p = d.len();
+    if p == 0 || series[0].len() <= p + 2 {
+        return (0.0, 0);
+    }
+    let n = series[0].len();
+    let nf = n as f64;
+    let means: Vec<f64> = series.iter().map(|s| s.iter().sum::<f64>() / nf).collect();
+    let mut c = vec![vec![0.0; p]; p];
+    for i in 0..p {
+        for k in 0..=i {
+            let v: f64 = (0..n)
+                .map(|t| (series[i][t] - means[i]) * (series[k][t] - means[k]))
+                .sum::<f64>()
+                / ((nf - 1.0) * nf);
+            c[i][k] = v;
+            c[k][i] = v;
+        }
+    }
+    let sd: Vec<f64> = (0..p).map(|i| c[i][i].sqrt().max(1e-300)).collect();
+    for i in 0..p {
+        for k in 0..p {
+            c[i][k] /= sd[i] * sd[k];
+        }
+    }
+    let z: Vec<f64> = (0..p).map(|i| d[i] / sd[i]).collect();
+    let (vals, vecs) = jacobi_eigen(c);
+    let top = vals.iter().cloned().fold(0.0, f64::max);
+    let (mut chi2, mut dof) = (0.0, 0);
+    for (m, &lam) in vals.iter().enumerate() {
+        if lam > 1e-6 * top {
+            let proj: f64 = (0..p).map(|i| vecs[i][m] * z[i]).sum();
+            chi2 += proj * proj / lam;
+            dof += 1;
+        }
+    }
+    (chi2 * (nf - p as f64 - 2.0) / (nf - 1.0), dof)
+}
+
+/// Eigen-decomposition of a symmetric matrix by cyclic Jacobi rotations:
+/// (eigenvalues, eigenvectors as columns).
+fn jacobi_eigen(mut a: Vec<Vec<f64>>) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let p = a.len();
+    let mut v = vec![vec![0.0; p]; p];
+    for (i, row) in v.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _sweep in 0..100 {
+        let off: f64 = (0..p)
+            .flat_map(|i| (0..p).filter(move |&k| k != i).map(move |k| (i, k)))
+            .map(|(i, k)| a[i][k] * a[i][k])
+            .sum();
+        let diag: f64 = (0..p).map(|i| a[i][i] * a[i][i]).sum();
+        if off <= 1e-30 * diag {
+            break;
+        }
+        for i in 0..p {
+            for k in i + 1..p {
+                if a[i][k] == 0.0 {
+                    continue;
+                }
+                let theta = 0.5 * (a[k][k] - a[i][i]) / a[i][k];
+                // signum(0) = 1: a 45 degree rotation for equal diagonals.
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let cs = 1.0 / (t * t + 1.0).sqrt();
+                let sn = t * cs;
+                for row in a.iter_mut() {
+                    let (x, y) = (row[i], row[k]);
+                    row[i] = cs * x - sn * y;
+                    row[k] = sn * x + cs * y;
+                }
+                let (lo, hi) = a.split_at_mut(k);
+                for (x, y) in lo[i].iter_mut().zip(hi[0].iter_mut()) {
+                    let (xv, yv) = (*x, *y);
+                    *x = cs * xv - sn * yv;
+                    *y = sn * xv + cs * yv;
+                }
+                for row in v.iter_mut() {
+                    let (x, y) = (row[i], row[k]);
+                    row[i] = cs * x - sn * y;
+                    row[k] = sn * x + cs * y;
+                }
+            }
+        }
+    }
+    ((0..p).map(|i| a[i][i]).collect(), v)
+}
+
+/// (dx/m)^2 sum_r exp(-a^2 s^2 (|r|/lag)^(2H) / 2) exp(-i q.r) over the lags
+/// of the grid refined m times (same torus), at the coarse grid's
+/// frequencies (coarse index order).
+fn fine_power_law(g: &Grid, a: f64, hurst: f64, s: f64, lag: f64, m: usize) -> Vec<f64> {
+    let f = Grid {
+        nx: m * g.nx,
+        ny: m * g.ny,
+        dx: g.dx / m as f64,
+    };
+    let mut fft = Fft2::new(f.nx, f.ny);
+    let mut b: Vec<Complex64> = (0..f.len())
+        .map(|j| {
+            let (rx, ry) = f.lag(j % f.nx, j / f.nx);
+            let d = s * s * (rx.hypot(ry) / lag).powf(2.0 * hurst);
+            Complex64::new((-0.5 * a * a * d).exp(), 0.0)
+        })
+        .collect();
+    fft.forward(&mut b);
+    let fine_index = |i: usize, n: usize, nf: usize| -> usize {
+        let k = Grid::signed(i, n);
+        if k < 0 {
+            (k + nf as i64) as usize
+        } else {
+            k as usize
+        }
+    };
+    (0..g.len())
+        .map(|j| {
+            let (ix, iy) = (j % g.nx, j / g.nx);
+            let fj = fine_index(iy, g.ny, f.ny) * f.nx + fine_index(ix, g.nx, f.nx);
+            b[fj].re * f.dx * f.dx
+        })
+        .collect()
 }
 
 /// Verdict of one bin.
@@ -732,4 +1049,48 @@ pub fn gaussian_grid(tx: f64, ty: f64, g: f64, extent: f64) -> Grid {
 /// Number of grid steps between frequencies: 2 pi / L.
 pub fn dq(grid: &Grid) -> f64 {
     2.0 * PI / grid.lx()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jacobi_eigen_reconstructs() {
+        let m = vec![
+            vec![4.0, 1.0, 0.5, 0.0],
+            vec![1.0, 3.0, 0.2, 0.1],
+            vec![0.5, 0.2, 2.0, 0.7],
+            vec![0.0, 0.1, 0.7, 1.0],
+        ];
+        let (vals, vecs) = jacobi_eigen(m.clone());
+        for (c, &lam) in vals.iter().enumerate() {
+            for i in 0..4 {
+                let av: f64 = (0..4).map(|k| m[i][k] * vecs[k][c]).sum();
+                assert!((av - lam * vecs[i][c]).abs() < 1e-12);
+            }
+        }
+        assert!((vals.iter().sum::<f64>() - 10.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn covariance_chi2_of_independent_bins_is_the_sum_of_squares() {
+        // Two uncorrelated series (a fixed +-1 pattern and an orthogonal one):
+        // the covariance is diagonal and chi2 = sum (d / se)^2 (x Hotelling).
+        let n = 400;
+        let s1: Vec<f64> = (0..n)
+            .map(|t| if t % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let s2: Vec<f64> = (0..n)
+            .map(|t| if (t / 2) % 2 == 0 { 2.0 } else { -2.0 })
+            .collect();
+        let se =
+            |s: &[f64]| (s.iter().map(|x| x * x).sum::<f64>() / (n as f64 - 1.0) / n as f64).sqrt();
+        let d = [0.1, -0.3];
+        let (chi2, dof) = covariance_chi2(&[&s1, &s2], &d);
+        let want = ((d[0] / se(&s1)).powi(2) + (d[1] / se(&s2)).powi(2)) * (n as f64 - 4.0)
+            / (n as f64 - 1.0);
+        assert_eq!(dof, 2);
+        assert!((chi2 / want - 1.0).abs() < 1e-12, "{chi2} {want}");
+    }
 }

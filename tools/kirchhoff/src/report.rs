@@ -15,14 +15,14 @@ fn model_kind(r: &RandomResult) -> &'static str {
 
 pub fn random_csv(results: &[RandomResult]) -> String {
     let mut s = String::from(
-        "case,model,theta_i,roughness,cut,q,u,lambda_nm,theta_o,points,gt,gt_se,core,ratio,ratio_err,resolved,pass,sigmas,beckmann_ratio,first_order_ratio,floor\n",
+        "case,model,theta_i,roughness,cut,q,u,lambda_nm,theta_o,points,gt,gt_se,core,ratio,ratio_err,resolved,pass,sigmas,beckmann_ratio,first_order_ratio,floor,expected_gt,alias,power_law_fine\n",
     );
     for r in results {
         for b in &r.bins {
             let v = random::verdict(b, r.floor);
             let _ = writeln!(
                 s,
-                "{},{},{},{:.6e},{},{:.6e},{:.6e},{:.3},{:.3},{},{:.8e},{:.8e},{:.8e},{:.8e},{:.8e},{},{},{:.4},{:.8e},{:.8e},{:.6e}",
+                "{},{},{},{:.6e},{},{:.6e},{:.6e},{:.3},{:.3},{},{:.8e},{:.8e},{:.8e},{:.8e},{:.8e},{},{},{:.4},{:.8e},{:.8e},{:.6e},{:.8e},{:.8e},{:.8e}",
                 r.case.name,
                 model_kind(r),
                 r.case.theta_i_deg,
@@ -43,7 +43,10 @@ pub fn random_csv(results: &[RandomResult]) -> String {
                 v.sigmas,
                 b.beckmann / b.gt,
                 b.first_order / b.gt,
-                r.floor
+                r.floor,
+                b.expected_gt(),
+                b.alias,
+                b.power_law
             );
         }
     }
@@ -118,6 +121,8 @@ pub struct Summary {
     pub max_dev: f64,
     pub max_sigmas: f64,
     pub chi2_dof: f64,
+    /// max |core / E[GT] - 1| over the resolved bins (deterministic).
+    pub max_dev_expected: f64,
     pub within1: f64,
     pub within2: f64,
     /// Resolved bins beyond 3 sigma (expected: 0.27% of them).
@@ -134,6 +139,7 @@ pub fn summarise(r: &RandomResult) -> Summary {
         max_dev: 0.0,
         max_sigmas: 0.0,
         chi2_dof: 0.0,
+        max_dev_expected: 0.0,
         within1: 0.0,
         within2: 0.0,
         beyond3: 0,
@@ -151,6 +157,9 @@ pub fn summarise(r: &RandomResult) -> Summary {
             s.failed += 1;
         }
         s.max_dev = s.max_dev.max((b.ratio() - 1.0).abs());
+        s.max_dev_expected = s
+            .max_dev_expected
+            .max((b.core / b.expected_gt() - 1.0).abs());
         s.max_sigmas = s.max_sigmas.max(v.sigmas);
         s.chi2_dof += v.sigmas * v.sigmas;
         if v.sigmas <= 1.0 {
@@ -207,14 +216,14 @@ pub fn markdown(
         s,
         "\n## Summary: random surfaces (core / ground truth over resolved bins)\n"
     );
-    s.push_str("| case | roughness g (a^2 s^2/2 for fBm) | grid | realisations | time (s) | bins | resolved | failed | max abs(ratio-1) | max dev / MC err | chi2/dof | within 1 sigma | within 2 sigma | beyond 3 sigma |\n");
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("| case | roughness g (a^2 s^2/2 for fBm) | grid | realisations | time (s) | bins | resolved | failed | max abs(ratio-1) | max dev / MC err | chi2/dof | chi2/dof, bin covariance (dof) | GT vs E[GT]: chi2/dof, bin covariance | max abs(core / E[GT] - 1) | within 1 sigma | within 2 sigma | beyond 3 sigma |\n");
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in random {
         let m = summarise(r);
         if !m.available {
             let _ = writeln!(
                 s,
-                "| {} | {:.3} | {} | {} | {:.1} | {} | {} | core n/a | - | - | - | - | - | - |",
+                "| {} | {:.3} | {} | {} | {:.1} | {} | {} | core n/a | - | - | - | - | - | - | - | - | - |",
                 r.case.name,
                 r.roughness,
                 grid_text(r),
@@ -227,7 +236,7 @@ pub fn markdown(
         }
         let _ = writeln!(
             s,
-            "| {} | {:.3} | {} | {} | {:.1} | {} | {} | {} | {:.4} | {:.2} | {:.2} | {:.0}% | {:.0}% | {} |",
+            "| {} | {:.3} | {} | {} | {:.1} | {} | {} | {} | {:.4} | {:.2} | {:.2} | {:.2} ({}) | {:.2} | {:.1e} | {:.0}% | {:.0}% | {} |",
             r.case.name,
             r.roughness,
             grid_text(r),
@@ -239,6 +248,10 @@ pub fn markdown(
             m.max_dev,
             m.max_sigmas,
             m.chi2_dof,
+            r.chi2_cov / r.chi2_cov_dof.max(1) as f64,
+            r.chi2_cov_dof,
+            r.chi2_cov_expected / r.chi2_cov_dof.max(1) as f64,
+            m.max_dev_expected,
             100.0 * m.within1,
             100.0 * m.within2,
             m.beyond3
@@ -377,7 +390,7 @@ pub fn markdown(
             "\n### {}\n\ncore: `{}` via {}; floor {:.3e} um^2\n",
             r.case.name, r.core_json, r.core_route, r.floor
         );
-        s.push_str("| cut | q | u | lambda (nm) | theta_o (deg) | points | GT (um^2) | core / GT | status |\n|---|---|---|---|---|---|---|---|---|\n");
+        s.push_str("| cut | q | u | lambda (nm) | theta_o (deg) | points | GT (um^2) | core / GT | core / E[GT] | status |\n|---|---|---|---|---|---|---|---|---|---|\n");
         for b in &r.bins {
             let v = random::verdict(b, r.floor);
             let st = if !v.resolved {
@@ -389,7 +402,7 @@ pub fn markdown(
             };
             let _ = writeln!(
                 s,
-                "| {} | {:.4} | {:.4} | {:.1} | {:.1} | {} | {:.4e} | {:.4} +- {:.4} | {} |",
+                "| {} | {:.4} | {:.4} | {:.1} | {:.1} | {} | {:.4e} | {:.4} +- {:.4} | {:.6} | {} |",
                 b.cut,
                 b.q,
                 b.u_nominal,
@@ -399,6 +412,7 @@ pub fn markdown(
                 b.gt,
                 b.ratio(),
                 b.ratio() * b.rel_err(),
+                b.core / b.expected_gt(),
                 st
             );
         }
