@@ -64,10 +64,10 @@ impl Fresnel {
         match self {
             Fresnel::Constant(r) => *r,
             Fresnel::ComplexIndex { eta, k } => conductor_reflectance(cos_theta, *eta, *k),
-            Fresnel::Metal(table) => {
-                let (eta, k) = metal_index(table, lambda_nm);
-                conductor_reflectance(cos_theta, eta, k)
-            }
+            Fresnel::Metal(table) => match metal_grid(table) {
+                Some(grid) => grid.reflectance(cos_theta, lambda_nm),
+                None => metal_reflectance_exact(table, cos_theta, lambda_nm),
+            },
         }
     }
 
@@ -75,6 +75,107 @@ impl Fresnel {
     pub fn is_spectrally_flat(&self) -> bool {
         !matches!(self, Fresnel::Metal(_))
     }
+}
+
+/// A metal's reflectance from its measured index, without the grid.
+pub fn metal_reflectance_exact(table: &MetalTable, cos_theta: f64, lambda_nm: f64) -> f64 {
+    let (eta, k) = metal_index(table, lambda_nm);
+    conductor_reflectance(cos_theta, eta, k)
+}
+
+/// A metal's reflectance tabulated over the incidence cosine at wavelength
+/// rows every nanometre plus one at each measured wavelength (where the linearly
+/// interpolated index has kinks), interpolated linearly in both: the
+/// renderer's hot paths (every evaluation, each grating order,
+/// the sampling weights) call it, and the direct form costs a search of the
+/// measured wavelengths plus two square roots and two divisions. A 1 nm
+/// index finds the bracketing measured wavelengths without a search.
+/// Interpolation error below 2e-5 absolute (measured in the tests); 1.1 MB
+/// per metal in use, shared by every material of that metal.
+pub struct MetalGrid {
+    lambda_nm: Vec<f64>,
+    /// Row i: F at sqrt(cos) = 0, 1/GRID_COS_STEPS, ..., 1 for lambda_nm[i].
+    values: Vec<f32>,
+    /// For each whole nanometre from the first row: the index of the last
+    /// row at or below it.
+    row_of_nm: Vec<u16>,
+}
+
+const GRID_COS_STEPS: usize = 512;
+
+impl MetalGrid {
+    fn build(table: &'static MetalTable) -> MetalGrid {
+        let (first, end) = (
+            table.lambda_nm[0],
+            table.lambda_nm[table.lambda_nm.len() - 1],
+        );
+        let mut xs: Vec<f64> = table.lambda_nm.to_vec();
+        let mut lambda = first;
+        while lambda < end {
+            xs.push(lambda);
+            lambda += 1.0;
+        }
+        xs.sort_by(f64::total_cmp);
+        xs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        let mut values = Vec::with_capacity(xs.len() * (GRID_COS_STEPS + 1));
+        for &lambda in &xs {
+            let (eta, k) = metal_index(table, lambda);
+            for i in 0..=GRID_COS_STEPS {
+                let root = i as f64 / GRID_COS_STEPS as f64;
+                values.push(conductor_reflectance(root * root, eta, k) as f32);
+            }
+        }
+        let first = xs[0];
+        let span = (xs[xs.len() - 1] - first).ceil() as usize;
+        let row_of_nm = (0..=span)
+            .map(|d| {
+                let lambda = first + d as f64;
+                (xs.partition_point(|&x| x <= lambda).clamp(1, xs.len() - 1) - 1) as u16
+            })
+            .collect();
+        MetalGrid {
+            lambda_nm: xs,
+            values,
+            row_of_nm,
+        }
+    }
+
+    #[inline]
+    pub fn reflectance(&self, cos_theta: f64, lambda_nm: f64) -> f64 {
+        let xs = &self.lambda_nm;
+        let last = xs.len() - 1;
+        // Clamped at the table ends (NaN to the first row: callers zero it).
+        let lambda = if lambda_nm >= xs[0] {
+            lambda_nm.min(xs[last])
+        } else {
+            xs[0]
+        };
+        let mut r =
+            self.row_of_nm[((lambda - xs[0]) as usize).min(self.row_of_nm.len() - 1)] as usize;
+        while r + 1 < last && xs[r + 1] <= lambda {
+            r += 1;
+        }
+        let fy = ((lambda - xs[r]) / (xs[r + 1] - xs[r])).clamp(0.0, 1.0);
+        // Columns uniform in sqrt(cos): F is steepest towards grazing.
+        let x = cos_theta.clamp(0.0, 1.0).sqrt() * GRID_COS_STEPS as f64;
+        let x = if x.is_nan() { 0.0 } else { x };
+        let i = (x as usize).min(GRID_COS_STEPS - 1);
+        let fx = x - i as f64;
+        let row = GRID_COS_STEPS + 1;
+        let a = &self.values[r * row + i..r * row + i + 2];
+        let b = &self.values[(r + 1) * row + i..(r + 1) * row + i + 2];
+        let lo = a[0] as f64 + fx * (a[1] as f64 - a[0] as f64);
+        let hi = b[0] as f64 + fx * (b[1] as f64 - b[0] as f64);
+        lo + fy * (hi - lo)
+    }
+}
+
+/// The grid of one of the built-in metals (None for other tables).
+fn metal_grid(table: &MetalTable) -> Option<&'static MetalGrid> {
+    static GRIDS: [std::sync::OnceLock<MetalGrid>; METALS.len()] =
+        [const { std::sync::OnceLock::new() }; METALS.len()];
+    let index = METALS.iter().position(|m| m.name == table.name)?;
+    Some(GRIDS[index].get_or_init(|| MetalGrid::build(&METALS[index])))
 }
 
 /// Linear interpolation of a metal's index, clamped at the table ends.
@@ -149,6 +250,27 @@ mod tests {
         // Normal incidence closed form ((n-1)^2 + k^2)/((n+1)^2 + k^2).
         let r = conductor_reflectance(1.0, 1.2, 7.0);
         assert!((r - (0.04 + 49.0) / (4.84 + 49.0)).abs() < 1e-12);
+    }
+
+    /// The tabulated metal reflectance against the direct evaluation from
+    /// the measured index, densely over cos and the visible band.
+    #[test]
+    fn metal_grid_matches_direct_evaluation() {
+        let mut worst: f64 = 0.0;
+        for table in METALS.iter() {
+            let fresnel = Fresnel::Metal(metal_by_name(table.name).unwrap());
+            for a in 0..=997 {
+                let cos = a as f64 / 997.0;
+                for b in 0..=311 {
+                    let lambda = 360.0 + 470.0 * b as f64 / 311.0;
+                    let grid = fresnel.reflectance(cos, lambda);
+                    let exact = metal_reflectance_exact(table, cos, lambda);
+                    worst = worst.max((grid - exact).abs());
+                }
+            }
+        }
+        println!("metal reflectance grid: worst absolute error {worst:.2e}");
+        assert!(worst < 5e-5, "{worst}");
     }
 
     #[test]
