@@ -173,33 +173,40 @@ impl SeriesLobe {
 struct HorizonLobe {
     /// Unit vector of c0 in the plane (x axis when c0 = 0).
     along: [f64; 2],
-    rho0: f64,
     s: f64,
+    /// The truncated normal in alpha (fitted once, on the chord y' = 0:
+    /// R = sqrt(1 - y'^2) differs from 1 by ~s^2 / 2 across the lobe).
+    alpha_mean: f64,
+    alpha_sd: f64,
+    /// Its CDF at 0 and its mass over [0, pi].
+    cdf_lo: f64,
+    mass: f64,
 }
 
 impl HorizonLobe {
-    fn new(wi: DVec3, s: f64) -> Option<HorizonLobe> {
+    /// `tilt` in [0, 1] scales the (1 + wi.wo)^2 factor of the fit (1 for
+    /// smooth surfaces, towards 0 where the Poisson terms m >= 2 dominate).
+    fn new(wi: DVec3, s: f64, tilt: f64) -> Option<HorizonLobe> {
+        if !(s > 0.0 && s.is_finite()) {
+            return None;
+        }
         let rho0 = (wi.x * wi.x + wi.y * wi.y).sqrt();
         let along = if rho0 > 1e-12 {
             [-wi.x / rho0, -wi.y / rho0]
         } else {
             [1.0, 0.0]
         };
-        (s > 0.0 && s.is_finite()).then_some(HorizonLobe { along, rho0, s })
-    }
-
-    /// Mean and sd of the truncated normal in alpha for the chord at R.
-    fn alpha_law(&self, r: f64) -> (f64, f64) {
-        let delta = r - self.rho0;
-        let mu = if delta > 0.0 {
-            (self.rho0 / r).clamp(-1.0, 1.0).acos()
-        } else {
-            0.0
-        };
-        // Linearised width away from the rim; quartic regime at it.
-        let linear = self.s / (r * mu.sin());
-        let quartic = (2.0 * self.s / r).sqrt();
-        (mu, linear.min(quartic).min(PI))
+        let (alpha_mean, alpha_sd) = alpha_law(rho0, wi.z, s, tilt);
+        let cdf_lo = normal_cdf(-alpha_mean / alpha_sd);
+        let mass = normal_cdf((PI - alpha_mean) / alpha_sd) - cdf_lo;
+        (mass > 0.0 && mass.is_finite()).then_some(HorizonLobe {
+            along,
+            s,
+            alpha_mean,
+            alpha_sd,
+            cdf_lo,
+            mass,
+        })
     }
 
     fn sample(&self, r1: f64, r2: f64) -> Option<DVec3> {
@@ -208,10 +215,8 @@ impl HorizonLobe {
             return None;
         }
         let r = (1.0 - y * y).sqrt();
-        let (mu, sd) = self.alpha_law(r);
-        let lo = normal_cdf(-mu / sd);
-        let hi = normal_cdf((PI - mu) / sd);
-        let alpha = (mu + sd * inverse_normal(lo + r2 * (hi - lo))).clamp(0.0, PI);
+        let (mu, sd) = (self.alpha_mean, self.alpha_sd);
+        let alpha = (mu + sd * inverse_normal(self.cdf_lo + r2 * self.mass)).clamp(0.0, PI);
         let x = r * alpha.cos();
         let z = r * alpha.sin();
         if !(z > MIN_COS) {
@@ -231,17 +236,69 @@ impl HorizonLobe {
             return 0.0;
         }
         let alpha = wo.z.atan2(x);
-        let (mu, sd) = self.alpha_law(r);
-        let mass = normal_cdf((PI - mu) / sd) - normal_cdf(-mu / sd);
         let ty = y / self.s;
-        let ta = (alpha - mu) / sd;
-        let density = (-0.5 * (ty * ty + ta * ta)).exp() / (2.0 * PI * self.s * sd * mass);
+        let ta = (alpha - self.alpha_mean) / self.alpha_sd;
+        let density =
+            (-0.5 * (ty * ty + ta * ta)).exp() / (2.0 * PI * self.s * self.alpha_sd * self.mass);
         if density.is_finite() {
             density
         } else {
             0.0
         }
     }
+}
+
+/// Mean and sd of the truncated normal in alpha for the chord at R: a
+/// Laplace fit to ln[(1 + wi.wo)^2 exp(-(R cos alpha - |c0|)^2 / (2 s^2))].
+/// The factor (1 + wi.wo)^2 is what remains of f cos_o per unit solid
+/// angle once G's 1/cos_o and the 1/w^2 of the kernel cancel against
+/// g ~ w^2 (smooth surfaces); at grazing incidence it varies a
+/// hundredfold across the lobe and pushes it away from the horizon.
+fn alpha_law(rho0: f64, cos_i: f64, s: f64, tilt: f64) -> (f64, f64) {
+    let (r, s2) = (1.0, s * s);
+    let mut alpha = if r > rho0 {
+        (rho0 / r).clamp(-1.0, 1.0).acos()
+    } else {
+        0.0
+    };
+    let mut curvature = -1.0;
+    for _ in 0..6 {
+        let (sin_a, cos_a) = alpha.sin_cos();
+        let q = r * cos_a - rho0;
+        let h = (1.0 - r * (rho0 * cos_a - cos_i * sin_a)).max(1e-300);
+        let dh = r * (rho0 * sin_a + cos_i * cos_a);
+        let d1 = 2.0 * tilt * dh / h + q * r * sin_a / s2;
+        curvature = 2.0 * tilt * ((1.0 - h) / h - (dh / h) * (dh / h))
+            - (r * r * sin_a * sin_a - q * r * cos_a) / s2;
+        if !(curvature < 0.0) {
+            break;
+        }
+        let next = (alpha - d1 / curvature).clamp(0.0, PI);
+        let done = (next - alpha).abs() < 1e-9;
+        alpha = next;
+        if done {
+            break;
+        }
+    }
+    let laplace = if curvature < 0.0 {
+        (-1.0 / curvature).sqrt()
+    } else {
+        PI
+    };
+    // The quartic regime at the rim bounds the width.
+    let quartic = (2.0 * s / r).sqrt();
+    (alpha, laplace.min(quartic).clamp(1e-9, PI))
+}
+
+/// Van der Corput radical inverse of `index` in `base`.
+fn radical_inverse(mut index: usize, base: usize) -> f64 {
+    let (mut value, mut scale) = (0.0, 1.0 / base as f64);
+    while index > 0 {
+        value += (index % base) as f64 * scale;
+        index /= base;
+        scale /= base as f64;
+    }
+    value
 }
 
 /// Standard normal CDF.
@@ -796,7 +853,9 @@ impl Brdf {
                         let mean_term = g0 / -(-g0).exp_m1();
                         let sd = (2.0 * mean_term).sqrt() / (k * s.corr_x_um);
                         let to_rim = 1.0 - (1.0 - wi.z * wi.z).max(0.0).sqrt();
-                        match HorizonLobe::new(wi, sd) {
+                        // The (1 + wi.wo)^2 tilt belongs to the m = 1 term.
+                        let tilt = (-g0).exp();
+                        match HorizonLobe::new(wi, sd, tilt) {
                             Some(horizon) if s.isotropic && to_rim < HORIZON_REACH_SD * sd => {
                                 Lobe::SeriesNearHorizon {
                                     series,
@@ -922,16 +981,24 @@ impl AlbedoTable {
                 };
                 let mut sum = 0.0;
                 let mut state = 0x9e37_79b9_7f4a_7c15u64 ^ (i * 64 + j) as u64;
+                let shift = (
+                    ((state >> 11) as f64) / (1u64 << 53) as f64,
+                    ((state.rotate_left(29) >> 11) as f64) / (1u64 << 53) as f64,
+                );
                 for s in 0..ALBEDO_SAMPLES {
                     state = state
                         .wrapping_mul(6_364_136_223_846_793_005)
                         .wrapping_add(1_442_695_040_888_963_407);
                     let uniform = |shift: u32| ((state >> shift) & 0xffff) as f64 / 65536.0;
                     // The component choice stratified; the direction's own
-                    // numbers independent of it (strata shared with r0 would
-                    // bias each component towards part of its domain).
+                    // numbers a Halton (2, 3) point of a permuted index, so
+                    // that they are not correlated with it (strata shared
+                    // with r0 would bias each component towards part of its
+                    // domain), Cranley-Patterson rotated per entry.
                     let r0 = (s as f64 + uniform(48)) / ALBEDO_SAMPLES as f64;
-                    let (r1, r2) = (uniform(0), uniform(16) + uniform(32) / 65536.0);
+                    let index = (s * 97 + 13) % ALBEDO_SAMPLES;
+                    let r1 = (radical_inverse(index, 2) + shift.0).fract();
+                    let r2 = (radical_inverse(index, 3) + shift.1).fract();
                     let sample = sampler.sample([r0, r1, r2]);
                     if sample.pdf > 0.0 {
                         sum += brdf.eval_spectral(wi, sample.wo, lambda) * sample.wo.z / sample.pdf;
