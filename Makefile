@@ -103,4 +103,4 @@ bench:
 
 # The full numerical stress run (10^7 evaluations; CI runs 10^5 in test-rust).
 stress:
-	$(CARGO) run --release -p stress -- --count 10000000 --write docs/stress.md
+	$(CARGO) run --release -p stress --bin stress -- --count 10000000 --write docs/stress.md

@@ -1,6 +1,6 @@
 //! `stress`: the numerical stress run (see the library's `run` module).
 //!
-//! cargo run --release -p stress -- --count 10000000 [--seed 1] [--batch 128] [--write docs/stress.md]
+//! cargo run --release -p stress --bin stress -- --count 10000000 [--seed 1] [--batch 128] [--write docs/stress.md]
 //!
 //! Prints the counts; with --write, replaces the table between the
 //! `<!-- stress-table -->` markers of the given file. Exits with status 1 if
@@ -47,7 +47,7 @@ fn main() {
         let (head, rest) = doc.split_once(marker).unwrap_or((&doc, ""));
         let tail = rest.split_once(marker).map(|(_, t)| t).unwrap_or("\n");
         let text = format!(
-            "{head}{marker}\nCommand: `cargo run --release -p stress -- --count {} --seed {} --batch {}`\n\n{table}{marker}{tail}",
+            "{head}{marker}\nCommand: `cargo run --release -p stress --bin stress -- --count {} --seed {} --batch {}`\n\n{table}{marker}{tail}",
             options.count, options.seed, options.batch
         );
         std::fs::write(&path, text).expect("write the report");
