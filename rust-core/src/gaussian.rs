@@ -25,7 +25,7 @@
 //! the tests (all below 4e-5 relative).
 
 use crate::geometry::PairGeometry;
-use crate::special::{fast_exp, ln_factorial, ln_gamma};
+use crate::special::{fast_exp, fast_exp_vectorisable, ln_factorial, ln_gamma};
 use std::f64::consts::PI;
 
 /// Default relative truncation tolerance of the exact series.
@@ -229,24 +229,38 @@ pub(crate) const SPLINE_MARGIN: usize = 8;
 
 /// Replaces samples f_i of a uniform line by the coefficients c_i of the
 /// interpolating cubic B-spline, (c_{i-1} + 4 c_i + c_{i+1}) / 6 = f_i, with
-/// c = f at both ends (the ends are margins the caller discards). `scratch`
-/// has the line's length.
-pub(crate) fn spline_prefilter(f: &mut [f64], scratch: &mut [f64]) {
-    let n = f.len();
-    if n < 3 {
+/// c = f at both ends (the ends are margins the caller discards). The line
+/// has `len` points of `lanes` independent values each (point-major), all
+/// solved at once so that the sweeps vectorise over the lanes.
+pub(crate) fn spline_prefilter(data: &mut [f64], len: usize, lanes: usize) {
+    debug_assert_eq!(data.len(), len * lanes);
+    if len < 3 {
         return;
     }
-    // Thomas algorithm; the first and last equations are c = f.
+    // Thomas algorithm; the first and last equations are c = f. Its
+    // factors depend on the position only.
     const A: f64 = 1.0 / 6.0;
     const B: f64 = 4.0 / 6.0;
-    scratch[0] = 0.0;
-    for i in 1..n - 1 {
-        let m = 1.0 / (B - A * scratch[i - 1]);
-        scratch[i] = A * m;
-        f[i] = (f[i] - A * f[i - 1]) * m;
+    let mut upper = vec![0.0; len];
+    let mut inv_pivot = vec![0.0; len];
+    for i in 1..len - 1 {
+        inv_pivot[i] = 1.0 / (B - A * upper[i - 1]);
+        upper[i] = A * inv_pivot[i];
     }
-    for i in (1..n - 1).rev() {
-        f[i] -= scratch[i] * f[i + 1];
+    for i in 1..len - 1 {
+        let (done, rest) = data.split_at_mut(i * lanes);
+        let prev = &done[(i - 1) * lanes..];
+        let m = inv_pivot[i];
+        for (f, &p) in rest[..lanes].iter_mut().zip(prev) {
+            *f = (*f - A * p) * m;
+        }
+    }
+    for i in (1..len - 1).rev() {
+        let (head, next) = data.split_at_mut((i + 1) * lanes);
+        let u = upper[i];
+        for (f, &n) in head[i * lanes..].iter_mut().zip(&next[..lanes]) {
+            *f -= u * n;
+        }
     }
 }
 
@@ -264,16 +278,134 @@ pub(crate) fn bspline_weights(t: f64) -> [f64; 4] {
     ]
 }
 
-/// ln S at (g, x) by the most accurate of the fast forms: the universal
-/// table where it covers (g, x), else `poisson_series` (asymptotic,
-/// saddle-point or exact sum). -inf where S underflows.
+/// ln S at (g, x) as `ln_poisson_series_along_x` evaluates it (for one x).
 pub(crate) fn ln_poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
-    if settings.use_table && g.is_finite() && x.is_finite() && x >= 0.0 {
-        if let Some(l) = series_table().ln_lookup_parts(g, g.ln(), x.sqrt()) {
-            return l;
+    let mut out = [0.0];
+    ln_poisson_series_along_x(g, &[x.sqrt()], settings, f64::NEG_INFINITY, &mut out);
+    out[0]
+}
+
+/// rho beyond which `ln_poisson_series_along_x` stops reading the
+/// universal table (whose last columns end at 60).
+const ALONG_X_TABLE_RHO: f64 = TABLE_ROOT_X_MAX - 0.5;
+
+/// ln S(g, x) at one g for increasing x, given as sqrt(x) in `root_x`: the
+/// samples from which tables over the pair variables are built. Where the
+/// universal table covers (g, x) it serves (one row position for all x);
+/// beyond its rho range, for g <= 40 (far tails of smooth surfaces, ln S <
+/// -270), the terms around the mode are summed in one vectorised pass
+/// (`ln_poisson_series_window`); elsewhere (g outside the table, `use_table`
+/// off) `poisson_series` evaluates each point. S falls with x: once ln S is
+/// below `floor` the remaining outputs are set to -inf without evaluation.
+pub(crate) fn ln_poisson_series_along_x(
+    g: f64,
+    root_x: &[f64],
+    settings: &SeriesSettings,
+    floor: f64,
+    out: &mut [f64],
+) {
+    let table = series_table();
+    let mut values = root_x.iter().zip(out.iter_mut());
+    if settings.use_table && (TABLE_G_MIN..TABLE_G_MAX).contains(&g) {
+        let ln_g = g.ln();
+        let fg = (ln_g - table.ln_g_min) * table.inv_d_ln_g + 1.0;
+        let ig = (fg as usize).clamp(1, table.n_g - 3);
+        let wg = bspline_weights(fg - ig as f64);
+        let inv_root = 1.0 / (1.0 + g).sqrt();
+        let mut mode = 0;
+        for (&r, o) in values.by_ref() {
+            let rho = r * inv_root;
+            *o = if rho < ALONG_X_TABLE_RHO {
+                let fx = rho * table.inv_d_root_x + 1.0;
+                let ix = (fx as usize).clamp(1, table.n_root_x - 3);
+                let wx = bspline_weights(fx - ix as f64);
+                let mut acc = 0.0;
+                for (a, wa) in wg.iter().enumerate() {
+                    let row = &table.ln_s[(ig - 1 + a) * table.n_root_x + ix - 1..][..4];
+                    acc += wa
+                        * (wx[0] * row[0] as f64
+                            + wx[1] * row[1] as f64
+                            + wx[2] * row[2] as f64
+                            + wx[3] * row[3] as f64);
+                }
+                acc
+            } else {
+                ln_poisson_series_window(g, ln_g, r * r, &mut mode)
+                    .unwrap_or_else(|| poisson_series(g, r * r, settings).ln())
+            };
+            if !(*o >= floor) {
+                break;
+            }
+        }
+    } else {
+        for (&r, o) in values.by_ref() {
+            *o = poisson_series(g, r * r, settings).ln();
+            if !(*o >= floor) {
+                break;
+            }
         }
     }
-    poisson_series(g, x, settings).ln()
+    for (_, o) in values {
+        *o = f64::NEG_INFINITY;
+    }
+}
+
+/// ln S for g <= 40 by summing the terms within 6 standard deviations (of
+/// the bell the terms form around their mode, plus 3) of the largest one,
+/// from the index tables, in one pass without dependencies between terms.
+/// The terms are log-concave in m, so the ones left out are below ~e^-18 of
+/// the largest: 2e-9 relative where the table builders use it (far tails,
+/// measured in the tests), far below the f32 rounding of the tables. `mode`
+/// is a starting guess for the index of the largest term (0: none), updated
+/// to it: along increasing x it moves by a step or two. None when g > 40 or
+/// the window leaves the index tables.
+pub(crate) fn ln_poisson_series_window(g: f64, ln_g: f64, x: f64, mode: &mut usize) -> Option<f64> {
+    if !(g > 0.0 && g <= 40.0 && x >= 0.0) {
+        return None;
+    }
+    let t = index_tables();
+    let n = SMALL_INDEX_TABLE;
+    let ln_term = |m: usize| m as f64 * ln_g - t.ln_factorial[m] - x * t.inv[m] - t.ln[m];
+    let mut m = if *mode == 0 {
+        mode_estimate(g, x) as usize
+    } else {
+        *mode
+    }
+    .clamp(1, n - 2);
+    while m + 1 < n && ln_term(m + 1) > ln_term(m) {
+        m += 1;
+    }
+    while m > 1 && ln_term(m - 1) > ln_term(m) {
+        m -= 1;
+    }
+    *mode = m;
+    let peak = ln_term(m);
+    let mf = m as f64;
+    // -L''(m) of the continuous terms: 1/m (Poisson) + 2x/m^3 (lobe) - 1/m^2.
+    let curvature = (1.0 / mf + 2.0 * x / (mf * mf * mf) - 1.0 / (mf * mf)).max(1e-6);
+    let half_width = (6.0 / curvature.sqrt()) as usize + 3;
+    if m + half_width >= n {
+        return None;
+    }
+    // Four partial sums (floating-point sums are not reassociated for us).
+    let lo = m.saturating_sub(half_width).max(1);
+    let hi = m + half_width + 1;
+    let blocks = (hi - lo).div_ceil(4);
+    let mut sums = [0.0f64; 4];
+    for b in 0..blocks {
+        let start = (lo + 4 * b).min(n - 4);
+        let ln_fact: &[f64; 4] = t.ln_factorial[start..start + 4].try_into().unwrap();
+        let inv: &[f64; 4] = t.inv[start..start + 4].try_into().unwrap();
+        let ln_m: &[f64; 4] = t.ln[start..start + 4].try_into().unwrap();
+        for l in 0..4 {
+            let j = (start + l) as f64;
+            let term = fast_exp_vectorisable(j * ln_g - ln_fact[l] - x * inv[l] - ln_m[l] - peak);
+            // Terms counted twice at a clipped last block are masked out.
+            sums[l] += if start + l >= lo + 4 * b { term } else { 0.0 };
+        }
+    }
+    let sum = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    Some(peak - g + sum.ln())
 }
 
 fn series_table() -> &'static SeriesTable {
@@ -304,7 +436,7 @@ fn series_table() -> &'static SeriesTable {
                 *out = s.max(1e-300).ln();
             }
         }
-        prefilter_2d(&mut samples, rows, line);
+        prefilter_2d(&mut samples, rows, line, 1);
         let mut ln_s = Vec::with_capacity(n_g * n_root_x);
         for r in m..m + n_g {
             let row = &samples[r * line + m..][..n_root_x];
@@ -321,23 +453,14 @@ fn series_table() -> &'static SeriesTable {
     })
 }
 
-/// Prefilters a row-major grid of samples (`rows` x `cols`, one value per
-/// point) along both directions into bicubic B-spline coefficients.
-pub(crate) fn prefilter_2d(grid: &mut [f64], rows: usize, cols: usize) {
-    let mut scratch = vec![0.0; rows.max(cols)];
-    for row in grid.chunks_exact_mut(cols) {
-        spline_prefilter(row, &mut scratch[..cols]);
+/// Prefilters a row-major grid of samples (`rows` x `cols` points of
+/// `lanes` values each) along both directions into bicubic B-spline
+/// coefficients.
+pub(crate) fn prefilter_2d(grid: &mut [f64], rows: usize, cols: usize, lanes: usize) {
+    for row in grid.chunks_exact_mut(cols * lanes) {
+        spline_prefilter(row, cols, lanes);
     }
-    let mut column = vec![0.0; rows];
-    for c in 0..cols {
-        for (r, v) in column.iter_mut().enumerate() {
-            *v = grid[r * cols + c];
-        }
-        spline_prefilter(&mut column, &mut scratch[..rows]);
-        for (r, v) in column.iter().enumerate() {
-            grid[r * cols + c] = *v;
-        }
-    }
+    spline_prefilter(grid, rows, cols * lanes);
 }
 
 impl SeriesTable {
@@ -777,6 +900,40 @@ mod tests {
         );
         assert!(checked > 5000);
         assert!(worst < 1e-5, "worst {worst} at {worst_at:?}");
+    }
+
+    /// The windowed sum against the exact series in the far tails, where
+    /// the table builders use it.
+    #[test]
+    fn windowed_sum_matches_exact_series() {
+        let mut worst: f64 = 0.0;
+        let mut worst_at = (0.0, 0.0);
+        let mut used = 0;
+        for i in 0..60 {
+            let g = (TABLE_G_MIN.ln() + i as f64 / 59.0 * (40.0 / TABLE_G_MIN).ln()).exp();
+            for j in 0..80 {
+                // Where the tables use it: beyond the universal table.
+                let rho = 40.0 + 1.5 * j as f64;
+                let x = rho * rho * (1.0 + g);
+                let Some(l) = ln_poisson_series_window(g, g.ln(), x, &mut 0) else {
+                    continue;
+                };
+                let exact = poisson_series_exact(g, x, 1e-14);
+                // (S below 1e-300 loses digits to subnormal rounding.)
+                if !(exact > 1e-300) {
+                    continue;
+                }
+                used += 1;
+                let e = (l - exact.ln()).abs();
+                if e > worst {
+                    worst = e;
+                    worst_at = (g, x);
+                }
+            }
+        }
+        println!("windowed sum: {used} points, worst relative error {worst:.2e} at {worst_at:?}");
+        assert!(used > 2000);
+        assert!(worst < 1e-7, "worst {worst} at {worst_at:?}");
     }
 
     #[test]
