@@ -37,6 +37,9 @@ pub enum Surface {
 
 pub struct Brdf {
     pub params: MaterialParams,
+    /// The surface model. It may be adjusted (e.g. its series settings)
+    /// before the first evaluation; the Gaussian RGB table is built from it
+    /// on the first RGB evaluation and not rebuilt after later changes.
     pub surface: Surface,
     pub fresnel: Fresnel,
     /// Wavelength rule of the RGB path for spectrally smooth surfaces.
