@@ -91,7 +91,8 @@ void stam_brdf_coherent_probability(const StamBrdf *b, size_t n, const float *wi
 #define STAM_FLAG_SPECTRALLY_VARYING 4u
 uint32_t stam_brdf_flags(const StamBrdf *b);
 
-/* Bytes of memory the material holds (tables included). */
+/* Bytes of memory the material holds (tables included; a Gaussian surface's
+   RGB table once the first RGB evaluation has built it). */
 size_t stam_brdf_memory_bytes(const StamBrdf *b);
 
 /* Library version string, e.g. "0.1.0" (static storage). */

@@ -9,23 +9,27 @@
 //!
 //! i.e. the expectation of phi(m) = exp(-x/m)/m over a Poisson(g) count m
 //! (phi(0) = 0). The coherent lobe carries e^-g of the energy and is kept
-//! out of K. Four ways to evaluate S, tried in this order per call:
+//! out of K. Five ways to evaluate S, tried in this order per call:
+//! - a universal table of ln S over (ln g, sqrt(x / (1 + g))), bicubic
+//!   B-spline (1e-4 <= g < 1e4, rho < 60);
 //! - asymptotic (g >= `asymptotic_min_g`, near the specular peak): the
 //!   Poisson expectation by Gauss-Hermite quadrature with Edgeworth
 //!   corrections up to O(g^-3/2), 8 nodes whatever g is;
-//! - a universal table of ln S over (ln g, sqrt x), bicubic (g < 40);
+//! - windowed sum (far tails beyond the table, g <= 40): the terms within 6
+//!   standard deviations of the largest, summed in one vectorised pass;
 //! - saddle-point quadrature: the terms as a smooth bell in m integrated by
 //!   10-node Gauss-Hermite around its mode (large g off-specular, far tails);
 //! - exact: the terms summed outward from the largest one by their ratios,
 //!   stopping when a geometric bound on the tails falls below `tolerance`
-//!   times the partial sum. Used for `series_tolerance` below 1e-5 and
-//!   wherever the faster forms do not apply.
+//!   times the partial sum. Used for `series_tolerance` below 1e-5 (which
+//!   also skips the table, windowed sum and saddle rule) and wherever the
+//!   faster forms do not apply.
 //!
 //! Each form's accuracy against a plain log-space summation is measured in
 //! the tests (all below 4e-5 relative).
 
 use crate::geometry::PairGeometry;
-use crate::special::{fast_exp, ln_factorial, ln_gamma};
+use crate::special::{fast_exp, fast_exp_vectorisable, ln_factorial, ln_gamma};
 use std::f64::consts::PI;
 
 /// Default relative truncation tolerance of the exact series.
@@ -185,6 +189,14 @@ pub fn poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
         }
     }
     if settings.use_table {
+        // Far tails beyond the table (g <= 40): the terms around the mode,
+        // summed in one pass, are exact there and cheaper than the sums
+        // below (the saddle rule needs wider bells than these).
+        if x >= ALONG_X_TABLE_RHO * ALONG_X_TABLE_RHO * (1.0 + g) {
+            if let Some(l) = ln_poisson_series_window(g, g.ln(), x, &mut 0) {
+                return fast_exp(l);
+            }
+        }
         // The saddle rule's accuracy (~1e-5) is the table's.
         if let Some(s) = poisson_series_saddle(g, x) {
             return s;
@@ -199,8 +211,11 @@ pub fn poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
 /// -2 sqrt(x ln(m/g)) is nearly linear in it and near x = 0 ln S is even in
 /// it. For rough ones rho^2 ~ x/g, the Beckmann exponent tan^2/alpha^2, in
 /// which ln S ~ -ln g - rho^2 is a gentle quadratic. Both interpolate well
-/// with Catmull-Rom bicubics. Rows above g = 40 are filled by the saddle-point
-/// rule (the exact sum would take O(sqrt g) terms per node).
+/// with cubic splines: the table holds the coefficients of the interpolating
+/// bicubic B-spline (same 4x4 stencil as a Catmull-Rom bicubic, but fourth-
+/// instead of third-order accurate: ~1e-6 relative instead of ~1e-5 on this
+/// grid). Rows above g = 40 are filled by the saddle-point rule (the exact
+/// sum would take O(sqrt g) terms per node).
 struct SeriesTable {
     ln_g_min: f64,
     inv_d_ln_g: f64,
@@ -208,7 +223,8 @@ struct SeriesTable {
     inv_d_root_x: f64,
     n_root_x: usize,
     /// f32 halves the footprint (1.1 MB), and so the cache misses of lookups;
-    /// its rounding (6e-8 of |ln S| <= 700) stays below the interpolation error.
+    /// its rounding (6e-8 of |ln S|) stays below the interpolation error
+    /// wherever S matters.
     ln_s: Vec<f32>,
 }
 
@@ -218,26 +234,228 @@ const TABLE_D_LN_G: f64 = 0.08;
 const TABLE_ROOT_X_MAX: f64 = 60.0;
 const TABLE_D_ROOT_X: f64 = 0.05;
 
+/// Extra samples beyond the open ends of a spline line: the end condition's
+/// error decays by 2 - sqrt(3) = 0.27 per node into the line, so 8 nodes
+/// leave 3e-5 of an already small end error.
+pub(crate) const SPLINE_MARGIN: usize = 8;
+
+/// Replaces samples f_i of a uniform line by the coefficients c_i of the
+/// interpolating cubic B-spline, (c_{i-1} + 4 c_i + c_{i+1}) / 6 = f_i, with
+/// c = f at both ends (the ends are margins the caller discards). The line
+/// has `len` points of `lanes` independent values each (point-major), all
+/// solved at once so that the sweeps vectorise over the lanes.
+pub(crate) fn spline_prefilter(data: &mut [f64], len: usize, lanes: usize) {
+    debug_assert_eq!(data.len(), len * lanes);
+    if len < 3 {
+        return;
+    }
+    // Thomas algorithm; the first and last equations are c = f. Its
+    // factors depend on the position only.
+    const A: f64 = 1.0 / 6.0;
+    const B: f64 = 4.0 / 6.0;
+    let mut upper = vec![0.0; len];
+    let mut inv_pivot = vec![0.0; len];
+    for i in 1..len - 1 {
+        inv_pivot[i] = 1.0 / (B - A * upper[i - 1]);
+        upper[i] = A * inv_pivot[i];
+    }
+    for i in 1..len - 1 {
+        let (done, rest) = data.split_at_mut(i * lanes);
+        let prev = &done[(i - 1) * lanes..];
+        let m = inv_pivot[i];
+        for (f, &p) in rest[..lanes].iter_mut().zip(prev) {
+            *f = (*f - A * p) * m;
+        }
+    }
+    for i in (1..len - 1).rev() {
+        let (head, next) = data.split_at_mut((i + 1) * lanes);
+        let u = upper[i];
+        for (f, &n) in head[i * lanes..].iter_mut().zip(&next[..lanes]) {
+            *f -= u * n;
+        }
+    }
+}
+
+/// Cubic B-spline weights of the coefficients i-1, i, i+1, i+2 at i + t.
+#[inline(always)]
+pub(crate) fn bspline_weights(t: f64) -> [f64; 4] {
+    let s = 1.0 - t;
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        s * s * s * (1.0 / 6.0),
+        0.5 * t3 - t2 + 2.0 / 3.0,
+        (-0.5 * t3 + 0.5 * (t2 + t)) + 1.0 / 6.0,
+        t3 * (1.0 / 6.0),
+    ]
+}
+
+/// ln S at (g, x) as `ln_poisson_series_along_x` evaluates it (for one x).
+pub(crate) fn ln_poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
+    let mut out = [0.0];
+    ln_poisson_series_along_x(g, &[x.sqrt()], settings, f64::NEG_INFINITY, &mut out);
+    out[0]
+}
+
+/// rho beyond which `ln_poisson_series_along_x` stops reading the
+/// universal table (whose last columns end at 60).
+const ALONG_X_TABLE_RHO: f64 = TABLE_ROOT_X_MAX - 0.5;
+
+/// ln S(g, x) at one g for increasing x, given as sqrt(x) in `root_x`: the
+/// samples from which tables over the pair variables are built. Where the
+/// universal table covers (g, x) it serves (one row position for all x);
+/// beyond its rho range, for g <= 40 (far tails of smooth surfaces, ln S <
+/// -270), the terms around the mode are summed in one vectorised pass
+/// (`ln_poisson_series_window`); elsewhere (g outside the table, `use_table`
+/// off) `poisson_series` evaluates each point. S falls with x: once ln S is
+/// below `floor` the remaining outputs are set to -inf without evaluation.
+pub(crate) fn ln_poisson_series_along_x(
+    g: f64,
+    root_x: &[f64],
+    settings: &SeriesSettings,
+    floor: f64,
+    out: &mut [f64],
+) {
+    let table = series_table();
+    let mut values = root_x.iter().zip(out.iter_mut());
+    if settings.use_table && (TABLE_G_MIN..TABLE_G_MAX).contains(&g) {
+        let ln_g = g.ln();
+        let fg = (ln_g - table.ln_g_min) * table.inv_d_ln_g + 1.0;
+        let ig = (fg as usize).clamp(1, table.n_g - 3);
+        let wg = bspline_weights(fg - ig as f64);
+        let inv_root = 1.0 / (1.0 + g).sqrt();
+        let mut mode = 0;
+        for (&r, o) in values.by_ref() {
+            let rho = r * inv_root;
+            *o = if rho < ALONG_X_TABLE_RHO {
+                let fx = rho * table.inv_d_root_x + 1.0;
+                let ix = (fx as usize).clamp(1, table.n_root_x - 3);
+                let wx = bspline_weights(fx - ix as f64);
+                let mut acc = 0.0;
+                for (a, wa) in wg.iter().enumerate() {
+                    let row = &table.ln_s[(ig - 1 + a) * table.n_root_x + ix - 1..][..4];
+                    acc += wa
+                        * (wx[0] * row[0] as f64
+                            + wx[1] * row[1] as f64
+                            + wx[2] * row[2] as f64
+                            + wx[3] * row[3] as f64);
+                }
+                acc
+            } else {
+                ln_poisson_series_window(g, ln_g, r * r, &mut mode)
+                    .unwrap_or_else(|| poisson_series(g, r * r, settings).ln())
+            };
+            if !(*o >= floor) {
+                break;
+            }
+        }
+    } else {
+        for (&r, o) in values.by_ref() {
+            *o = poisson_series(g, r * r, settings).ln();
+            if !(*o >= floor) {
+                break;
+            }
+        }
+    }
+    for (_, o) in values {
+        *o = f64::NEG_INFINITY;
+    }
+}
+
+/// ln S for g <= 40 by summing the terms within 6 standard deviations (of
+/// the bell the terms form around their mode, plus 3) of the largest one,
+/// from the index tables, in one pass without dependencies between terms.
+/// The terms are log-concave in m, so the ones left out are below ~e^-18 of
+/// the largest: 2e-9 relative where the table builders use it (far tails,
+/// measured in the tests), far below the f32 rounding of the tables. `mode`
+/// is a starting guess for the index of the largest term (0: none), updated
+/// to it: along increasing x it moves by a step or two. None when g > 40 or
+/// the window leaves the index tables.
+pub(crate) fn ln_poisson_series_window(g: f64, ln_g: f64, x: f64, mode: &mut usize) -> Option<f64> {
+    if !(g > 0.0 && g <= 40.0 && x >= 0.0) {
+        return None;
+    }
+    let t = index_tables();
+    let n = SMALL_INDEX_TABLE;
+    let ln_term = |m: usize| m as f64 * ln_g - t.ln_factorial[m] - x * t.inv[m] - t.ln[m];
+    let guess = if *mode == 0 {
+        mode_estimate(g, x)
+    } else {
+        *mode as f64
+    };
+    if !(guess < (n - 2) as f64) {
+        return None;
+    }
+    let mut m = (guess as usize).max(1);
+    while m + 1 < n && ln_term(m + 1) > ln_term(m) {
+        m += 1;
+    }
+    while m > 1 && ln_term(m - 1) > ln_term(m) {
+        m -= 1;
+    }
+    *mode = m;
+    let peak = ln_term(m);
+    let mf = m as f64;
+    // -L''(m) of the continuous terms: 1/m (Poisson) + 2x/m^3 (lobe) - 1/m^2.
+    let curvature = (1.0 / mf + 2.0 * x / (mf * mf * mf) - 1.0 / (mf * mf)).max(1e-6);
+    let half_width = (6.0 / curvature.sqrt()) as usize + 3;
+    if m + half_width >= n {
+        return None;
+    }
+    // Four partial sums (floating-point sums are not reassociated for us).
+    let lo = m.saturating_sub(half_width).max(1);
+    let hi = m + half_width + 1;
+    let blocks = (hi - lo).div_ceil(4);
+    let mut sums = [0.0f64; 4];
+    for b in 0..blocks {
+        let start = (lo + 4 * b).min(n - 4);
+        let ln_fact: &[f64; 4] = t.ln_factorial[start..start + 4].try_into().unwrap();
+        let inv: &[f64; 4] = t.inv[start..start + 4].try_into().unwrap();
+        let ln_m: &[f64; 4] = t.ln[start..start + 4].try_into().unwrap();
+        for l in 0..4 {
+            let j = (start + l) as f64;
+            let term = fast_exp_vectorisable(j * ln_g - ln_fact[l] - x * inv[l] - ln_m[l] - peak);
+            // Terms counted twice at a clipped last block are masked out.
+            sums[l] += if start + l >= lo + 4 * b { term } else { 0.0 };
+        }
+    }
+    let sum = (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    Some(peak - g + sum.ln())
+}
+
 fn series_table() -> &'static SeriesTable {
     static TABLE: std::sync::OnceLock<SeriesTable> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
         let ln_g_min = TABLE_G_MIN.ln();
-        // One node of margin on each side for the bicubic stencil.
+        // One coefficient beyond each end for the bicubic stencil.
         let n_g = ((TABLE_G_MAX.ln() - ln_g_min) / TABLE_D_LN_G).ceil() as usize + 3;
         let n_root_x = (TABLE_ROOT_X_MAX / TABLE_D_ROOT_X).ceil() as usize + 3;
-        let mut ln_s = Vec::with_capacity(n_g * n_root_x);
-        for i in 0..n_g {
-            let g = (ln_g_min + (i as f64 - 1.0) * TABLE_D_LN_G).exp();
-            for j in 0..n_root_x {
-                let rho = (j as f64 - 1.0).abs() * TABLE_D_ROOT_X;
+        // Samples over the table plus SPLINE_MARGIN on every side: sample
+        // row r is table row r - m (ln g = ln_g_min + (r - m - 1) d), sample
+        // column c table column c - m (rho = (c - m - 1) d; ln S is even in
+        // rho, so negative rho mirrors positive).
+        let m = SPLINE_MARGIN;
+        let rows = n_g + 2 * m;
+        let line = n_root_x + 2 * m;
+        let mut samples = vec![0.0; rows * line];
+        for (r, row) in samples.chunks_exact_mut(line).enumerate() {
+            let g = (ln_g_min + (r as f64 - m as f64 - 1.0) * TABLE_D_LN_G).exp();
+            for (c, out) in row.iter_mut().enumerate() {
+                let rho = (c as f64 - m as f64 - 1.0).abs() * TABLE_D_ROOT_X;
                 let x = rho * rho * (1.0 + g);
                 let s = if g > 40.0 {
                     poisson_series_saddle(g, x).unwrap_or_else(|| poisson_series_exact(g, x, 1e-13))
                 } else {
                     poisson_series_exact(g, x, 1e-13)
                 };
-                ln_s.push(s.max(1e-300).ln() as f32);
+                *out = s.max(1e-300).ln();
             }
+        }
+        prefilter_2d(&mut samples, rows, line, 1);
+        let mut ln_s = Vec::with_capacity(n_g * n_root_x);
+        for r in m..m + n_g {
+            let row = &samples[r * line + m..][..n_root_x];
+            ln_s.extend(row.iter().map(|&c| c as f32));
         }
         SeriesTable {
             ln_g_min,
@@ -250,16 +468,14 @@ fn series_table() -> &'static SeriesTable {
     })
 }
 
-#[inline(always)]
-fn catmull_rom(t: f64) -> [f64; 4] {
-    let t2 = t * t;
-    let t3 = t2 * t;
-    [
-        0.5 * (-t3 + 2.0 * t2 - t),
-        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-        0.5 * (t3 - t2),
-    ]
+/// Prefilters a row-major grid of samples (`rows` x `cols` points of
+/// `lanes` values each) along both directions into bicubic B-spline
+/// coefficients.
+pub(crate) fn prefilter_2d(grid: &mut [f64], rows: usize, cols: usize, lanes: usize) {
+    for row in grid.chunks_exact_mut(cols * lanes) {
+        spline_prefilter(row, cols, lanes);
+    }
+    spline_prefilter(grid, rows, cols * lanes);
 }
 
 impl SeriesTable {
@@ -272,6 +488,12 @@ impl SeriesTable {
     /// The same from g, ln g and sqrt(x) when the caller has them.
     #[inline]
     fn lookup_parts(&self, g: f64, ln_g: f64, root_x: f64) -> Option<f64> {
+        self.ln_lookup_parts(g, ln_g, root_x).map(fast_exp)
+    }
+
+    /// ln S from g, ln g and sqrt(x); None outside the table.
+    #[inline]
+    fn ln_lookup_parts(&self, g: f64, ln_g: f64, root_x: f64) -> Option<f64> {
         if !(TABLE_G_MIN..TABLE_G_MAX).contains(&g) {
             return None;
         }
@@ -283,8 +505,8 @@ impl SeriesTable {
         let fx = rho * self.inv_d_root_x + 1.0;
         let ig = (fg as usize).clamp(1, self.n_g - 3);
         let ix = (fx as usize).clamp(1, self.n_root_x - 3);
-        let wg = catmull_rom(fg - ig as f64);
-        let wx = catmull_rom(fx - ix as f64);
+        let wg = bspline_weights(fg - ig as f64);
+        let wx = bspline_weights(fx - ix as f64);
         let mut acc = 0.0;
         for (a, wa) in wg.iter().enumerate() {
             let row = &self.ln_s[(ig - 1 + a) * self.n_root_x + ix - 1..][..4];
@@ -294,7 +516,7 @@ impl SeriesTable {
                     + wx[2] * row[2] as f64
                     + wx[3] * row[3] as f64);
         }
-        Some(fast_exp(acc))
+        Some(acc)
     }
 }
 
@@ -655,6 +877,80 @@ mod tests {
         assert!(worst < 1e-4, "worst {worst} at {worst_at:?}");
     }
 
+    /// The universal table between its nodes, against the forms it was
+    /// filled from, at random (g, rho) over its whole range wherever S is
+    /// within 1e-20 of its peak S(g, 0) (and above e^-200).
+    #[test]
+    fn table_matches_its_sources_between_nodes() {
+        let mut rng = crate::benchmark::SplitMix64(11);
+        let table = series_table();
+        let mut worst: f64 = 0.0;
+        let mut worst_at = (0.0, 0.0);
+        let mut checked = 0;
+        for _ in 0..20_000 {
+            let g = (TABLE_G_MIN.ln() + rng.next_f64() * (TABLE_G_MAX / TABLE_G_MIN).ln()).exp();
+            let rho = rng.next_f64() * 25.0;
+            let x = rho * rho * (1.0 + g);
+            let source = |x: f64| {
+                if g > 40.0 {
+                    poisson_series_saddle(g, x).unwrap_or_else(|| poisson_series_exact(g, x, 1e-13))
+                } else {
+                    poisson_series_exact(g, x, 1e-13)
+                }
+            };
+            let exact = source(x);
+            if !(exact.ln() > (source(0.0).ln() - 46.0).max(-200.0)) {
+                continue;
+            }
+            let got = table.lookup(g, x).unwrap();
+            let e = rel_err(got, exact);
+            checked += 1;
+            if e > worst {
+                worst = e;
+                worst_at = (g, x);
+            }
+        }
+        println!(
+            "universal table: {checked} points, worst relative error {worst:.2e} at {worst_at:?}"
+        );
+        assert!(checked > 5000);
+        assert!(worst < 1e-5, "worst {worst} at {worst_at:?}");
+    }
+
+    /// The windowed sum against the exact series in the far tails, where
+    /// the table builders use it.
+    #[test]
+    fn windowed_sum_matches_exact_series() {
+        let mut worst: f64 = 0.0;
+        let mut worst_at = (0.0, 0.0);
+        let mut used = 0;
+        for i in 0..60 {
+            let g = (TABLE_G_MIN.ln() + i as f64 / 59.0 * (40.0 / TABLE_G_MIN).ln()).exp();
+            for j in 0..80 {
+                // Where the tables use it: beyond the universal table.
+                let rho = 40.0 + 1.5 * j as f64;
+                let x = rho * rho * (1.0 + g);
+                let Some(l) = ln_poisson_series_window(g, g.ln(), x, &mut 0) else {
+                    continue;
+                };
+                let exact = poisson_series_exact(g, x, 1e-14);
+                // (S below 1e-300 loses digits to subnormal rounding.)
+                if !(exact > 1e-300) {
+                    continue;
+                }
+                used += 1;
+                let e = (l - exact.ln()).abs();
+                if e > worst {
+                    worst = e;
+                    worst_at = (g, x);
+                }
+            }
+        }
+        println!("windowed sum: {used} points, worst relative error {worst:.2e} at {worst_at:?}");
+        assert!(used > 2000);
+        assert!(worst < 1e-7, "worst {worst} at {worst_at:?}");
+    }
+
     #[test]
     fn saddle_quadrature_matches_reference() {
         let mut worst: f64 = 0.0;
@@ -695,11 +991,13 @@ mod tests {
                 assert!(s <= 1.0 + 1e-9, "S({g}, {x}) = {s} exceeds its bound 1");
             }
         }
-        // Far off-specular (the mode moves far above g) agrees too.
-        let (g, x) = (3.0, 5000.0);
-        let a = poisson_series(g, x, &settings);
-        let b = poisson_series_reference(g, x);
-        assert!(rel_err(a, b) < 1e-4, "{a} vs {b}");
+        // Far off-specular (the mode moves far above g) agrees too, in the
+        // table and beyond it (rho = 75, the windowed sum; S ~ 1e-140).
+        for (g, x) in [(3.0, 5000.0), (1.5, 2.5 * 75.0 * 75.0)] {
+            let a = poisson_series(g, x, &settings);
+            let b = poisson_series_reference(g, x);
+            assert!(rel_err(a, b) < 1e-5, "{a} vs {b}");
+        }
     }
 
     #[test]

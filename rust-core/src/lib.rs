@@ -16,6 +16,7 @@ pub mod ffi;
 pub mod fractal;
 pub mod fresnel;
 pub mod gaussian;
+pub mod gaussian_rgb;
 pub mod geometry;
 pub mod params;
 pub mod periodic;
