@@ -175,8 +175,6 @@ struct HorizonLobe {
     along: [f64; 2],
     /// sd of y', across c0.
     s: f64,
-    /// The plane lobe's sd along c0 (towards the rim).
-    s_along: f64,
     /// The truncated normal in alpha (fitted once, on the chord y' = 0:
     /// R = sqrt(1 - y'^2) differs from 1 by ~s^2 / 2 across the lobe).
     alpha_mean: f64,
@@ -213,7 +211,6 @@ impl HorizonLobe {
         (mass > 0.0 && mass.is_finite()).then_some(HorizonLobe {
             along,
             s,
-            s_along,
             alpha_mean,
             alpha_sd,
             cdf_lo,
@@ -274,7 +271,7 @@ fn alpha_law(rho0: f64, cos_i: f64, s: f64, tilt: f64) -> (f64, f64) {
         0.0
     };
     let mut curvature = -1.0;
-    for _ in 0..6 {
+    for _ in 0..4 {
         let (sin_a, cos_a) = alpha.sin_cos();
         let q = r * cos_a - rho0;
         let h = (1.0 - r * (rho0 * cos_a - cos_i * sin_a)).max(1e-300);
@@ -846,12 +843,11 @@ impl Brdf {
                         let to_rim = 1.0 - (1.0 - wi.z * wi.z).max(0.0).sqrt();
                         // The (1 + wi.wo)^2 tilt belongs to the m = 1 term.
                         let tilt = (-g0).exp();
-                        match HorizonLobe::new(wi, sd_x, sd_y, tilt) {
-                            Some(horizon)
-                                if s.isotropic && to_rim < HORIZON_REACH_SD * horizon.s_along =>
-                            {
-                                Lobe::Horizon(horizon)
-                            }
+                        // Isotropic surfaces only; the twin is built (a
+                        // small fit) only when the lobe reaches the rim.
+                        let near_rim = s.isotropic && to_rim < HORIZON_REACH_SD * sd_x;
+                        match near_rim.then(|| HorizonLobe::new(wi, sd_x, sd_y, tilt)) {
+                            Some(Some(horizon)) => Lobe::Horizon(horizon),
                             _ => Lobe::Series(series),
                         }
                     })
