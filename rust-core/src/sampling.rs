@@ -52,6 +52,9 @@ pub const RGB_BAND_NM: (f64, f64) = (380.0, 780.0);
 /// Wavelength bins of the grating rainbow (fewer for very many orders).
 const RAINBOW_MAX_BINS: usize = 20;
 const RAINBOW_MAX_CELLS: usize = 8192;
+/// Grating order weights are computed exactly at every this-many wavelength
+/// nodes of the rainbow and interpolated in between.
+const RAINBOW_WEIGHT_STEP: usize = 4;
 /// Cap of the G / w^2 factor used in order weights (grazing orders).
 const GW2_CAP: f64 = 50.0;
 /// Orders farther than this many standard deviations are left out of pdf sums
@@ -1096,10 +1099,47 @@ fn rainbow_grating_component(
     let bin_nm = (hi - lo) / bins as f64;
     let stride = bins + 1;
     let period_nm = 1000.0 * period_um;
+    // Order weights (without the band density): exact at every
+    // RAINBOW_WEIGHT_STEP-th node, interpolated linearly in between where
+    // both neighbours carry weight (they are a heuristic: the pdf is exact
+    // for whatever y is; |c_n|^2 and G vary slowly over a few bins), exact
+    // elsewhere (orders appearing over the horizon between two nodes).
+    let propagating = |i: usize| {
+        let scale = period_nm / (lo + i as f64 * bin_nm);
+        let first = (((-wi.x - half) * scale).ceil() as i64).max(-n_max);
+        let last = (((-wi.x + half) * scale).floor() as i64).min(n_max);
+        first..=last
+    };
+    let weight_at = |n: i64, i: usize| {
+        let lambda = lo + i as f64 * bin_nm;
+        let u_n = n as f64 * lambda / period_nm;
+        order_weight(wi, u_n, lambda, 1.0, |beta| order_power(n, beta))
+    };
+    let mut w = vec![0.0; orders * stride];
+    let coarse = |i: usize| i.is_multiple_of(RAINBOW_WEIGHT_STEP) || i == bins;
+    for i in (0..stride).filter(|&i| coarse(i)) {
+        for n in propagating(i) {
+            w[(n + n_max) as usize * stride + i] = weight_at(n, i);
+        }
+    }
+    for i in (0..stride).filter(|&i| !coarse(i)) {
+        let i0 = i - i % RAINBOW_WEIGHT_STEP;
+        let i1 = (i0 + RAINBOW_WEIGHT_STEP).min(bins);
+        let t = (i - i0) as f64 / (i1 - i0) as f64;
+        for n in propagating(i) {
+            let row = (n + n_max) as usize * stride;
+            let (w0, w1) = (w[row + i0], w[row + i1]);
+            w[row + i] = if w0 > 0.0 && w1 > 0.0 {
+                w0 + t * (w1 - w0)
+            } else {
+                weight_at(n, i)
+            };
+        }
+    }
     let mut y = vec![0.0; orders * stride];
     for i in 0..stride {
         let lambda = lo + i as f64 * bin_nm;
-        let band = band_density(lambda) * brdf.fresnel.reflectance(wi.z, lambda);
+        let band = rainbow_band_density(bins)[i] * brdf.fresnel.reflectance(wi.z, lambda);
         if !(band > 0.0) {
             continue;
         }
@@ -1107,16 +1147,12 @@ fn rainbow_grating_component(
         // |-wi.x - n lambda / Lam| < sqrt(1 - wi.y^2). The rainbows (n != 0)
         // fall to 0 at the band ends so that the density stays continuous
         // in (u, v).
-        let scale = period_nm / lambda;
-        let first = (((-wi.x - half) * scale).ceil() as i64).max(-n_max);
-        let last = (((-wi.x + half) * scale).floor() as i64).min(n_max);
-        for n in first..=last {
+        for n in propagating(i) {
             if n != 0 && (i == 0 || i == bins) {
                 continue;
             }
-            let u_n = n as f64 * lambda / period_nm;
-            let w = order_weight(wi, u_n, lambda, 1.0, |beta| order_power(n, beta));
-            y[(n + n_max) as usize * stride + i] = band * w;
+            let k = (n + n_max) as usize * stride + i;
+            y[k] = band * w[k];
         }
     }
     let mut cell = vec![0.0; orders * stride];
@@ -1319,6 +1355,25 @@ pub fn band_density(lambda_nm: f64) -> f64 {
     let y = 0.821 * g(568.8, 46.9, 40.5) + 0.286 * g(530.9, 16.3, 31.1);
     let z = 1.217 * g(437.0, 11.8, 36.0) + 0.681 * g(459.0, 26.0, 13.8);
     (x + y + z).max(0.0)
+}
+
+/// `band_density` at the rainbow's wavelength nodes for `bins` bins (each
+/// value is eight Gaussians; a rainbow is built per strategy).
+fn rainbow_band_density(bins: usize) -> &'static [f64] {
+    static TABLES: OnceLock<Vec<Vec<f64>>> = OnceLock::new();
+    let tables = TABLES.get_or_init(|| {
+        let (lo, hi) = RGB_BAND_NM;
+        (0..=RAINBOW_MAX_BINS)
+            .map(|b| {
+                let b = b.max(1);
+                let bin_nm = (hi - lo) / b as f64;
+                (0..=b)
+                    .map(|i| band_density(lo + i as f64 * bin_nm))
+                    .collect()
+            })
+            .collect()
+    });
+    &tables[bins.clamp(1, RAINBOW_MAX_BINS)]
 }
 
 /// The RGB mixture's wavelengths for spectrally smooth models: the midpoint
