@@ -63,8 +63,8 @@ def time_render(mi, bsdf, size, spp, repeats):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--spp', type=int, default=32)
-    ap.add_argument('--size', type=int, default=96)
+    ap.add_argument('--spp', type=int, default=64)
+    ap.add_argument('--size', type=int, default=128)
     ap.add_argument('--repeats', type=int, default=3)
     ap.add_argument('--variants', default='scalar_rgb,scalar_spectral')
     ap.add_argument('--write', default=None, help='markdown file to write the table to')
