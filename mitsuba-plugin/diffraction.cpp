@@ -55,7 +55,7 @@ Diffraction BSDF (:monosp:`diffraction`)
      (x) and bitangent (y) (micrometres; brushed metal).
  * - hurst
    - |float|
-   - Fractal surfaces: Hurst exponent H in (0, 1].
+   - Fractal surfaces: Hurst exponent H in [0.001, 1].
  * - lag_um
    - |float|
    - Fractal surfaces: lag L over which the rms height difference is sigma_um.

@@ -132,6 +132,9 @@ pub(crate) struct Window {
 /// closed form Phi_2 = pi exp(-x^2/4) is added back: near alpha = 2 the
 /// power-law tail is far below the core and would be lost in the rounding of
 /// a transform of Phi itself.
+/// Steps of the t-range search of one FFT window before it gives up.
+const T_RANGE_MAX_STEPS: usize = 20_000;
+
 pub(crate) fn fft_window(
     alpha: f64,
     c: f64,
@@ -156,7 +159,14 @@ pub(crate) fn fft_window(
     let tau = (0.2 / kappa.sqrt()).min(0.25);
     let mut t_max = tau;
     let mut below = 0;
+    // Bounded: for hurst within ~1e-4 of 0 the range search would run for
+    // minutes (complex ln Gamma per step) and then fail anyway.
+    let mut steps = 0;
     for _ in 0..200_000 {
+        steps += 1;
+        if steps > T_RANGE_MAX_STEPS {
+            return None;
+        }
         let lm = lnm(C64::new(c, t_max)).re - f0;
         if lm < -40.0 {
             below += 1;
@@ -172,10 +182,22 @@ pub(crate) fn fft_window(
     let right = (90.0 * kappa).sqrt() + 45.0 / (2.0 + alpha - c);
     let mut y_need = left + right;
     for _attempt in 0..6 {
-        let mut n = ((y_need / hf).ceil() as usize).next_power_of_two().max(64);
+        // Windows beyond 2^24 points (hurst within ~1e-30 of 0, where
+        // the Mellin transform's scales overflow) are refused, not grown
+        // until an index overflows.
+        const MAX_POINTS: f64 = (1u64 << 24) as f64;
+        let points = (y_need / hf).ceil();
+        if !(points <= MAX_POINTS && t_max.is_finite()) {
+            return None;
+        }
+        let mut n = (points as usize).next_power_of_two().max(64);
         let (dt, jmax) = loop {
             let dt = TWO_PI / (n as f64 * hf);
-            let jmax = (t_max / dt).ceil() as usize;
+            let jmax = (t_max / dt).ceil();
+            if !(jmax.is_finite() && n as f64 <= MAX_POINTS) {
+                return None;
+            }
+            let jmax = jmax as usize;
             if 2 * jmax + 2 <= n {
                 break (dt, jmax);
             }
