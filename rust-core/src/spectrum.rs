@@ -533,26 +533,9 @@ fn natural_spline_second_derivs(xs: &[f64], y: &[f64]) -> Vec<f64> {
 const SQRT_2PI: f64 = 2.506_628_274_631_000_5;
 const SQRT_HALF_PI: f64 = 1.253_314_137_315_500_3;
 
-/// Complementary error function, Numerical Recipes' Chebyshev fit `erfcc`
-/// (fractional error below 1.2e-7 everywhere); exact 0 / 2 in the far tails.
-fn erfc(x: f64) -> f64 {
-    let z = x.abs();
-    let t = 1.0 / (1.0 + 0.5 * z);
-    let poly = -1.265_512_23
-        + t * (1.000_023_68
-            + t * (0.374_091_96
-                + t * (0.096_784_18
-                    + t * (-0.186_288_06
-                        + t * (0.278_868_07
-                            + t * (-1.135_203_98
-                                + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
-    let r = t * (-z * z + poly).exp();
-    if x >= 0.0 {
-        r
-    } else {
-        2.0 - r
-    }
-}
+// The complementary error function is the libm crate's (accurate to an ulp
+// or two), as in the sampling strategies.
+use libm::erfc;
 
 /// Tuning of the moment evaluation.
 #[derive(Debug, Clone, Copy)]
