@@ -1,5 +1,28 @@
 //! Special functions shared by the surface models.
 
+const LOG2_E: f64 = std::f64::consts::LOG2_E;
+/// ln 2 split so that n ln2_hi is exact for the n of the range reduction.
+const LN2_HI: f64 = 6.931_471_803_691_238e-1;
+const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
+
+/// e^r for the reduced argument |r| <= ln2/2: Taylor series of degree 9
+/// (~2e-10) by Estrin's scheme with FMAs, a dependency chain of 5 operations
+/// instead of Horner's 9 multiply-adds, which dominated the table lookups.
+#[inline(always)]
+fn exp_reduced(r: f64) -> f64 {
+    let r2 = r * r;
+    let r4 = r2 * r2;
+    let r8 = r4 * r4;
+    let p01 = r + 1.0;
+    let p23 = r.mul_add(1.0 / 6.0, 0.5);
+    let p45 = r.mul_add(1.0 / 120.0, 1.0 / 24.0);
+    let p67 = r.mul_add(1.0 / 5040.0, 1.0 / 720.0);
+    let p89 = r.mul_add(1.0 / 362880.0, 1.0 / 40320.0);
+    let p03 = r2.mul_add(p23, p01);
+    let p47 = r2.mul_add(p67, p45);
+    r8.mul_add(p89, r4.mul_add(p47, p03))
+}
+
 /// exp(x) to about 2e-10 relative error, several times faster than libm's
 /// exp because it skips the last-ulp work: the BRDF is returned as f32, so
 /// 1e-9 is far below anything a caller can see. Underflows to 0 below
@@ -12,25 +35,9 @@ pub fn fast_exp(x: f64) -> f64 {
     if x > 709.0 {
         return f64::INFINITY;
     }
-    const LOG2_E: f64 = std::f64::consts::LOG2_E;
-    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
-    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     let n = (x * LOG2_E).round();
     let r = (x - n * LN2_HI) - n * LN2_LO;
-    // Taylor series of e^r on |r| <= ln2/2; degree 9 leaves ~2e-10. Estrin's
-    // scheme with FMAs: a dependency chain of 5 operations instead of
-    // Horner's 9 multiply-adds, which dominated the table lookups.
-    let r2 = r * r;
-    let r4 = r2 * r2;
-    let r8 = r4 * r4;
-    let p01 = r + 1.0;
-    let p23 = r.mul_add(1.0 / 6.0, 0.5);
-    let p45 = r.mul_add(1.0 / 120.0, 1.0 / 24.0);
-    let p67 = r.mul_add(1.0 / 5040.0, 1.0 / 720.0);
-    let p89 = r.mul_add(1.0 / 362880.0, 1.0 / 40320.0);
-    let p03 = r2.mul_add(p23, p01);
-    let p47 = r2.mul_add(p67, p45);
-    let p = r8.mul_add(p89, r4.mul_add(p47, p03));
+    let p = exp_reduced(r);
     // 2^n by building the exponent bits; n is in [-1022, 1023] here except at
     // the very bottom of the range, handled by splitting the scale.
     let ni = n as i64;
@@ -48,26 +55,13 @@ pub fn fast_exp(x: f64) -> f64 {
 /// x log2(e) + 1.5 * 2^52. Same polynomial and accuracy (2e-10).
 #[inline(always)]
 pub fn fast_exp_vectorisable(x: f64) -> f64 {
-    const LOG2_E: f64 = std::f64::consts::LOG2_E;
-    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
-    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     const SHIFT: f64 = 6_755_399_441_055_744.0; // 1.5 * 2^52
     let x = x.clamp(-700.0, 700.0);
     // t = SHIFT + round(x log2 e): its low mantissa bits hold n.
     let t = x.mul_add(LOG2_E, SHIFT);
     let n = t - SHIFT;
     let r = (x - n * LN2_HI) - n * LN2_LO;
-    let r2 = r * r;
-    let r4 = r2 * r2;
-    let r8 = r4 * r4;
-    let p01 = r + 1.0;
-    let p23 = r.mul_add(1.0 / 6.0, 0.5);
-    let p45 = r.mul_add(1.0 / 120.0, 1.0 / 24.0);
-    let p67 = r.mul_add(1.0 / 5040.0, 1.0 / 720.0);
-    let p89 = r.mul_add(1.0 / 362880.0, 1.0 / 40320.0);
-    let p03 = r2.mul_add(p23, p01);
-    let p47 = r2.mul_add(p67, p45);
-    let p = r8.mul_add(p89, r4.mul_add(p47, p03));
+    let p = exp_reduced(r);
     // n + 1023 is in [1, 2046]: shifting the low bits of t's mantissa
     // (2^51 + n) plus 1023 left by 52 leaves exactly 2^n's exponent field.
     p * f64::from_bits(t.to_bits().wrapping_add(1023) << 52)
