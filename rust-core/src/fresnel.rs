@@ -13,8 +13,13 @@ pub enum Fresnel {
     /// Conductor (or dielectric for k = 0) with a wavelength-independent
     /// complex index eta + i k.
     ComplexIndex { eta: f64, k: f64 },
-    /// A metal with a measured spectral index.
-    Metal(&'static MetalTable),
+    /// A metal with a measured spectral index, and its reflectance grid
+    /// (built once per metal and process; None only for a table that is not
+    /// one of the built-in metals). Made by `Fresnel::metal`.
+    Metal {
+        table: &'static MetalTable,
+        grid: Option<&'static MetalGrid>,
+    },
 }
 
 /// Names accepted for `fresnel`, in the order documented.
@@ -39,7 +44,7 @@ impl std::fmt::Debug for Fresnel {
         match self {
             Fresnel::Constant(r) => write!(f, "Constant({r})"),
             Fresnel::ComplexIndex { eta, k } => write!(f, "ComplexIndex {{ eta: {eta}, k: {k} }}"),
-            Fresnel::Metal(t) => write!(f, "Metal({})", t.name),
+            Fresnel::Metal { table, .. } => write!(f, "Metal({})", table.name),
         }
     }
 }
@@ -51,7 +56,7 @@ impl PartialEq for Fresnel {
             (Fresnel::ComplexIndex { eta: a, k: b }, Fresnel::ComplexIndex { eta: c, k: d }) => {
                 a == c && b == d
             }
-            (Fresnel::Metal(a), Fresnel::Metal(b)) => a.name == b.name,
+            (Fresnel::Metal { table: a, .. }, Fresnel::Metal { table: b, .. }) => a.name == b.name,
             _ => false,
         }
     }
@@ -64,7 +69,7 @@ impl Fresnel {
         match self {
             Fresnel::Constant(r) => *r,
             Fresnel::ComplexIndex { eta, k } => conductor_reflectance(cos_theta, *eta, *k),
-            Fresnel::Metal(table) => match metal_grid(table) {
+            Fresnel::Metal { table, grid } => match grid {
                 Some(grid) => grid.reflectance(cos_theta, lambda_nm),
                 None => metal_reflectance_exact(table, cos_theta, lambda_nm),
             },
@@ -73,7 +78,16 @@ impl Fresnel {
 
     /// True when the reflectance does not depend on wavelength.
     pub fn is_spectrally_flat(&self) -> bool {
-        !matches!(self, Fresnel::Metal(_))
+        !matches!(self, Fresnel::Metal { .. })
+    }
+
+    /// A measured metal, with its shared reflectance grid resolved here
+    /// rather than on every evaluation.
+    pub fn metal(table: &'static MetalTable) -> Fresnel {
+        Fresnel::Metal {
+            table,
+            grid: metal_grid(table),
+        }
     }
 }
 
@@ -258,7 +272,7 @@ mod tests {
     fn metal_grid_matches_direct_evaluation() {
         let mut worst: f64 = 0.0;
         for table in METALS.iter() {
-            let fresnel = Fresnel::Metal(metal_by_name(table.name).unwrap());
+            let fresnel = Fresnel::metal(metal_by_name(table.name).unwrap());
             for a in 0..=997 {
                 let cos = a as f64 / 997.0;
                 for b in 0..=311 {
@@ -277,14 +291,14 @@ mod tests {
     fn metals_are_reflective_and_named() {
         for name in ["aluminium", "silver", "gold", "copper", "chromium"] {
             let table = metal_by_name(name).expect(name);
-            let f = Fresnel::Metal(table);
+            let f = Fresnel::metal(table);
             for lambda in [360.0, 450.0, 550.0, 650.0, 830.0] {
                 let r = f.reflectance(1.0, lambda);
                 assert!(r > 0.3 && r <= 1.0, "{name} {lambda}: {r}");
             }
         }
         // Gold is yellow: much more reflective in the red than the blue.
-        let gold = Fresnel::Metal(metal_by_name("gold").unwrap());
+        let gold = Fresnel::metal(metal_by_name("gold").unwrap());
         assert!(gold.reflectance(1.0, 650.0) > gold.reflectance(1.0, 450.0) + 0.3);
         assert!(metal_by_name("unobtainium").is_none());
     }

@@ -441,7 +441,7 @@ fn parse_heights(value: &Value) -> Result<Vec<f64>, StamError> {
 fn parse_fresnel(value: Option<&Value>) -> Result<Fresnel, StamError> {
     let names = metal_names().join(", ");
     match value {
-        None => Ok(Fresnel::Metal(
+        None => Ok(Fresnel::metal(
             metal_by_name("aluminium").expect("aluminium table is built in"),
         )),
         Some(Value::Number(n)) => match n.as_f64() {
@@ -450,7 +450,7 @@ fn parse_fresnel(value: Option<&Value>) -> Result<Fresnel, StamError> {
                 "parameter 'fresnel' = {n} is out of range: a constant reflectance must be in (0, 1] (or a metal name: {names}; or {{\"eta\": n, \"k\": k}})"
             ))),
         },
-        Some(Value::String(s)) => metal_by_name(s).map(Fresnel::Metal).ok_or_else(|| {
+        Some(Value::String(s)) => metal_by_name(s).map(Fresnel::metal).ok_or_else(|| {
             err(format!(
                 "unknown metal '{s}' for parameter 'fresnel' (accepted: {names}; or a reflectance in (0, 1]; or {{\"eta\": n, \"k\": k}})"
             ))
