@@ -968,22 +968,15 @@ impl AlbedoTable {
                     }]),
                 };
                 let mut sum = 0.0;
-                let mut state = 0x9e37_79b9_7f4a_7c15u64 ^ (i * 64 + j) as u64;
-                let shift = (
-                    ((state >> 11) as f64) / (1u64 << 53) as f64,
-                    ((state.rotate_left(29) >> 11) as f64) / (1u64 << 53) as f64,
-                );
+                let mut rng = crate::benchmark::SplitMix64((i * 64 + j) as u64);
+                let shift = (rng.next_f64(), rng.next_f64());
                 for s in 0..ALBEDO_SAMPLES {
-                    state = state
-                        .wrapping_mul(6_364_136_223_846_793_005)
-                        .wrapping_add(1_442_695_040_888_963_407);
-                    let uniform = |shift: u32| ((state >> shift) & 0xffff) as f64 / 65536.0;
                     // The component choice stratified; the direction's own
                     // numbers a Halton (2, 3) point of a permuted index, so
                     // that they are not correlated with it (strata shared
                     // with r0 would bias each component towards part of its
                     // domain), Cranley-Patterson rotated per entry.
-                    let r0 = (s as f64 + uniform(48)) / ALBEDO_SAMPLES as f64;
+                    let r0 = (s as f64 + rng.next_f64()) / ALBEDO_SAMPLES as f64;
                     let index = (s * 97 + 13) % ALBEDO_SAMPLES;
                     let r1 = (radical_inverse(index, 2) + shift.0).fract();
                     let r2 = (radical_inverse(index, 3) + shift.1).fract();
