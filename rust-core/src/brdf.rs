@@ -50,6 +50,9 @@ pub struct Brdf {
     /// Diffuse albedo table of the sampling strategy (isotropic Gaussian
     /// surfaces), built on the first sample.
     pub(crate) sampling_albedo: std::sync::OnceLock<crate::sampling::AlbedoTable>,
+    /// Periodic surfaces: the sampling strategy's order weights over the
+    /// incident direction, made on the first sample.
+    pub(crate) grating_table: std::sync::OnceLock<Option<crate::sampling::GratingTable>>,
     /// Gaussian surfaces: the kernel at every node of the rule over the
     /// pair variables, built on the first RGB evaluation (spectral-only use
     /// never pays for it); None when the material does not use tables.
@@ -215,6 +218,7 @@ impl Brdf {
             rgb_rule,
             id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             sampling_albedo: std::sync::OnceLock::new(),
+            grating_table: std::sync::OnceLock::new(),
             rgb_table: std::sync::OnceLock::new(),
         })
     }
@@ -238,6 +242,11 @@ impl Brdf {
         std::mem::size_of::<Brdf>()
             + self.rgb_rule.memory_bytes()
             + self.sampling_albedo.get().map_or(0, |t| t.memory_bytes())
+            + self
+                .grating_table
+                .get()
+                .and_then(|t| t.as_ref())
+                .map_or(0, |t| t.memory_bytes())
             + self
                 .rgb_table
                 .get()

@@ -98,14 +98,16 @@ pub fn metal_reflectance_exact(table: &MetalTable, cos_theta: f64, lambda_nm: f6
 }
 
 /// A metal's reflectance tabulated over the incidence cosine at wavelength
-/// rows every nanometre plus one at each measured wavelength (where the linearly
-/// interpolated index has kinks), interpolated linearly in both: the
-/// renderer's hot paths (every evaluation, each grating order,
-/// the sampling weights) call it, and the direct form costs a search of the
-/// measured wavelengths plus two square roots and two divisions. A 1 nm
-/// index finds the bracketing measured wavelengths without a search.
-/// Interpolation error below 2e-5 absolute (measured in the tests); 1.1 MB
-/// per metal in use, shared by every material of that metal.
+/// rows every nanometre plus one at each measured wavelength (where the
+/// linearly interpolated index has kinks): linear in wavelength, Catmull-Rom
+/// over 64 columns uniform in sqrt(cos). The renderer's hot paths (every
+/// evaluation, each grating order) call it, and the direct form costs a
+/// search of the measured wavelengths plus two square roots and two
+/// divisions. A 1 nm index finds the bracketing measured wavelengths without
+/// a search. Interpolation error below 2.5e-5 absolute (measured in the
+/// tests). 120 kB per metal in use, shared by every material of that metal:
+/// small enough to stay in cache during a render (the 512 linear columns of
+/// an earlier version, 1.1 MB, made every lookup a cache miss there).
 pub struct MetalGrid {
     lambda_nm: Vec<f64>,
     /// Row i: F at sqrt(cos) = 0, 1/GRID_COS_STEPS, ..., 1 for lambda_nm[i].
@@ -115,7 +117,7 @@ pub struct MetalGrid {
     row_of_nm: Vec<u16>,
 }
 
-const GRID_COS_STEPS: usize = 512;
+const GRID_COS_STEPS: usize = 64;
 
 impl MetalGrid {
     fn build(table: &'static MetalTable) -> MetalGrid {
@@ -174,12 +176,23 @@ impl MetalGrid {
         let x = cos_theta.clamp(0.0, 1.0).sqrt() * GRID_COS_STEPS as f64;
         let x = if x.is_nan() { 0.0 } else { x };
         let i = (x as usize).min(GRID_COS_STEPS - 1);
-        let fx = x - i as f64;
+        let t = x - i as f64;
+        // Catmull-Rom weights (the end columns repeated beyond the ends).
+        let t2 = t * t;
+        let t3 = t2 * t;
+        let wts = [
+            0.5 * (-t3 + 2.0 * t2 - t),
+            0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+            0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+            0.5 * (t3 - t2),
+        ];
+        let cols = [i.saturating_sub(1), i, i + 1, (i + 2).min(GRID_COS_STEPS)];
         let row = GRID_COS_STEPS + 1;
-        let a = &self.values[r * row + i..r * row + i + 2];
-        let b = &self.values[(r + 1) * row + i..(r + 1) * row + i + 2];
-        let lo = a[0] as f64 + fx * (a[1] as f64 - a[0] as f64);
-        let hi = b[0] as f64 + fx * (b[1] as f64 - b[0] as f64);
+        let at = |r: usize| -> f64 {
+            let v = &self.values[r * row..(r + 1) * row];
+            wts.iter().zip(cols).map(|(w, c)| w * v[c] as f64).sum()
+        };
+        let (lo, hi) = (at(r), at(r + 1));
         lo + fy * (hi - lo)
     }
 }

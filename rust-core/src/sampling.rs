@@ -24,11 +24,11 @@
 use crate::brdf::{in_band, wavenumber_per_um, Brdf, Surface, COHERENT_MAX_G};
 use crate::gaussian::{poisson_series, SeriesSettings};
 use crate::geometry::{normalize_direction, reflect, MIN_COS};
+use crate::periodic::PeriodicSurface;
 use glam::DVec3;
 use std::cell::RefCell;
 use std::f64::consts::PI;
-use std::rc::Rc;
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 /// Share of the non-coherent probability given to cosine-weighted sampling.
 pub const DEFENSIVE_FRACTION: f64 = 0.1;
@@ -366,6 +366,7 @@ impl OrdersLobe {
 /// Gaussian of sd sigma(lambda); y_n = 0 at the band ends. Order 0: a
 /// Gaussian of sd sigma(lambda_i) around the mirror, node i with its
 /// trapezoid mass. The density is continuous in (u, v).
+#[derive(Clone)]
 struct RainbowLobe {
     period_nm: f64,
     coherence_um: f64,
@@ -374,9 +375,12 @@ struct RainbowLobe {
     n_max: i64,
     /// y[(n + n_max) * (bins + 1) + i]
     y: Vec<f64>,
-    /// Sampling masses, same layout: segment [i, i+1] for n != 0 (i < bins),
-    /// node i for n = 0.
-    cell: Vec<f64>,
+    /// Cumulative sampling masses, same layout: segment [i, i+1] for n != 0
+    /// (i < bins), node i for n = 0 (searched by bisection: hundreds of
+    /// cells for a compact disc).
+    cdf: Vec<f64>,
+    /// The order-0 masses (node i), for the pdf.
+    zero_order: Vec<f64>,
 }
 
 impl RainbowLobe {
@@ -391,7 +395,7 @@ impl RainbowLobe {
 
     fn sample(&self, t: f64, r1: f64, r2: f64) -> (f64, f64) {
         let stride = self.bins + 1;
-        let c = pick(&self.cell, t);
+        let c = pick_cdf(&self.cdf, t);
         let n = (c / stride) as i64 - self.n_max;
         let i = c % stride;
         if n == 0 {
@@ -418,13 +422,16 @@ impl RainbowLobe {
     fn pdf_uv(&self, u: f64, v: f64) -> f64 {
         let stride = self.bins + 1;
         let mut sum = 0.0;
-        // Order 0: Gaussians at the nodes.
-        let row0 = self.n_max as usize * stride;
-        for i in 0..stride {
-            let p = self.cell[row0 + i];
+        // Order 0: Gaussians at the nodes, widest (last) first: once one
+        // underflows, the narrower ones do too.
+        let rho2 = u * u + v * v;
+        for (i, &p) in self.zero_order.iter().enumerate().rev() {
+            let s = self.sigma(self.node(i));
+            let e = rho2 / (2.0 * s * s);
+            if !(e < 745.0) {
+                break;
+            }
             if p > 0.0 {
-                let s = self.sigma(self.node(i));
-                let e = (u * u + v * v) / (2.0 * s * s);
                 sum += p * (-e).exp() / (2.0 * PI * s * s);
             }
         }
@@ -596,7 +603,7 @@ pub struct DirectionSampler<'a> {
     brdf: &'a Brdf,
     wi: DVec3,
     /// Equally weighted components (several in RGB mode).
-    components: Rc<Vec<Component>>,
+    components: Arc<Vec<Component>>,
 }
 
 /// Strategies recently built on this thread. A renderer asks for the pdf and
@@ -614,7 +621,7 @@ struct CachedStrategy {
     brdf_id: u64,
     wi_bits: [u64; 3],
     lambda_bits: u64,
-    components: Rc<Vec<Component>>,
+    components: Arc<Vec<Component>>,
 }
 
 /// Enough for the 4 wavelengths of a spectral path, twice.
@@ -727,9 +734,21 @@ impl Brdf {
             return DirectionSampler {
                 brdf: self,
                 wi: DVec3::Z,
-                components: Rc::new(Vec::new()),
+                components: Arc::new(Vec::new()),
             };
         };
+        // Gratings in RGB mode: the table's cell holds the strategy.
+        if let (None, Surface::Periodic(p)) = (lambda_nm, &self.surface) {
+            let components = match self.grating_table(p) {
+                Some(table) => table.cell(self, p, wi).rgb.clone(),
+                None => Arc::new(vec![Component::cosine_only()]),
+            };
+            return DirectionSampler {
+                brdf: self,
+                wi,
+                components,
+            };
+        }
         let wi_bits = wi.to_array().map(f64::to_bits);
         // RGB mode is keyed by a NaN pattern no wavelength argument can carry
         // here (NaN wavelengths get the cosine strategy, like any other
@@ -744,7 +763,7 @@ impl Brdf {
         let components = match cached {
             Some(components) => components,
             None => {
-                let components = Rc::new(self.build_components(wi, lambda_nm));
+                let components = Arc::new(self.build_components(wi, lambda_nm));
                 SAMPLER_CACHE.with(|cache| {
                     let mut cache = cache.borrow_mut();
                     let slot = cache.next;
@@ -770,7 +789,18 @@ impl Brdf {
         match lambda_nm {
             Some(lambda) => vec![self.spectral_component(wi, lambda)],
             None => match &self.surface {
-                Surface::Periodic(_) => vec![self.rainbow_component(wi)],
+                Surface::Periodic(p) => {
+                    vec![self
+                        .grating_table(p)
+                        .map_or_else(Component::cosine_only, |table| {
+                            let cell = table.cell(self, p, wi);
+                            let Some(Lobe::Rainbow(r)) = cell.rgb[0].lobe.as_ref() else {
+                                return Component::cosine_only();
+                            };
+                            // The same strategy, as a copy that can be altered.
+                            Component::new(0.0, 1.0, Some(Lobe::Rainbow(r.clone())))
+                        })]
+                }
                 _ => rgb_sampling_nodes()
                     .iter()
                     .map(|&lambda| self.spectral_component(wi, lambda))
@@ -888,26 +918,15 @@ impl Brdf {
                     lobe: Some(Lobe::Radial { ln_c }),
                 }
             }
-            Surface::Periodic(p) => grating_component(
-                self,
-                wi,
-                lambda_nm,
-                p.period_um(),
-                p.coherence_um(),
-                &|n, beta| p.order_power(n, beta),
-            ),
+            Surface::Periodic(p) => grating_component(self, p, wi, lambda_nm),
         }
     }
 
-    fn rainbow_component(&self, wi: DVec3) -> Component {
-        match &self.surface {
-            Surface::Periodic(p) => {
-                rainbow_grating_component(self, wi, p.period_um(), p.coherence_um(), &|n, beta| {
-                    p.order_power(n, beta)
-                })
-            }
-            _ => Component::cosine_only(),
-        }
+    /// The grating table, made on first use (cells are built lazily).
+    fn grating_table(&self, p: &PeriodicSurface) -> Option<&GratingTable> {
+        self.grating_table
+            .get_or_init(|| GratingTable::new(p.period_um()))
+            .as_ref()
     }
 }
 
@@ -960,7 +979,7 @@ impl AlbedoTable {
                 let sampler = DirectionSampler {
                     brdf,
                     wi,
-                    components: Rc::new(vec![Component {
+                    components: Arc::new(vec![Component {
                         p_coh: 0.0,
                         p_def: c.p_def / rest,
                         p_lobe: c.p_lobe / rest,
@@ -1022,21 +1041,262 @@ impl AlbedoTable {
     }
 }
 
-/// A grating of period `period_um` and coherence length `coherence_um` with
-/// order powers order_power(n, beta) = |c_n(beta)|^2, one wavelength: the
-/// propagating orders (centre direction above the horizon) weighted by
-/// `order_weight`, each a Gaussian of sd 1 / (sqrt(2) k l) in u and v.
-fn grating_component(
-    brdf: &Brdf,
-    wi: DVec3,
-    lambda_nm: f64,
-    period_um: f64,
-    coherence_um: f64,
-    order_power: &dyn Fn(i64, f64) -> f64,
-) -> Component {
+/// Memory budget of one material's grating table (its cells are built on
+/// first use, so a render pays for the incident directions it meets).
+const GRATING_TABLE_BYTES: usize = 8 << 20;
+/// Grid of the table over (wi.x, wi.y) in [-1, 1]^2: cells per axis.
+const GRATING_MAX_CELLS_PER_AXIS: usize = 48;
+const GRATING_MIN_CELLS_PER_AXIS: usize = 8;
+/// Smallest cosine of the direction at which an order's weight is taken
+/// (orders just below the horizon at a cell's centre propagate elsewhere in
+/// the cell).
+const GRATING_RIM_COS: f64 = 0.02;
+
+/// Grating order weights tabulated over the incident direction. The
+/// weights only steer the sampling (the pdf is exact for whatever weights),
+/// so they are computed once per cell of a grid over (wi.x, wi.y), at its
+/// centre, instead of for every incident direction: that was hundreds of
+/// |c_n|^2 and geometry evaluations per RGB strategy, most of the cost of
+/// an RGB sample of a compact disc. The orders' centres, widths and which of
+/// them propagate stay exact for the actual wi. A cell gives the
+/// wavelength-interpolated weights of the spectral strategy and holds the
+/// whole RGB strategy (the rainbow).
+pub struct GratingTable {
+    n_max: i64,
+    bins: usize,
+    cells_per_axis: usize,
+    cells: Vec<OnceLock<GratingCell>>,
+}
+
+struct GratingCell {
+    /// Order weights without band density and Fresnel at the rainbow's
+    /// wavelength nodes: [(n + n_max) * (bins + 1) + i]; 0 for orders that
+    /// propagate nowhere in the cell.
+    weights: Vec<f32>,
+    /// The RGB strategy made from them.
+    rgb: Arc<Vec<Component>>,
+}
+
+impl GratingTable {
+    /// None when the orders cannot be enumerated (absurd periods).
+    fn new(period_um: f64) -> Option<GratingTable> {
+        // |u| <= 2 bounds every propagating order.
+        let n_max_f = (2.0 * 1000.0 * period_um / RGB_BAND_NM.0).floor();
+        if !(0.0..1e6).contains(&n_max_f) {
+            return None;
+        }
+        let n_max = n_max_f as i64;
+        let orders = (2 * n_max + 1) as usize;
+        let bins = (RAINBOW_MAX_CELLS / orders).clamp(1, RAINBOW_MAX_BINS);
+        // f32 weights, f64 rainbow densities and masses.
+        let cell_bytes = orders * (bins + 1) * (4 + 8 + 8) + 256;
+        let cells_in_disk = (GRATING_TABLE_BYTES / cell_bytes) as f64;
+        let cells_per_axis = ((cells_in_disk * 4.0 / PI).sqrt() as usize)
+            .clamp(GRATING_MIN_CELLS_PER_AXIS, GRATING_MAX_CELLS_PER_AXIS);
+        Some(GratingTable {
+            n_max,
+            bins,
+            cells_per_axis,
+            cells: (0..cells_per_axis * cells_per_axis)
+                .map(|_| OnceLock::new())
+                .collect(),
+        })
+    }
+
+    fn bin_nm(&self) -> f64 {
+        (RGB_BAND_NM.1 - RGB_BAND_NM.0) / self.bins as f64
+    }
+
+    /// The cell of wi (built on first use).
+    fn cell(&self, brdf: &Brdf, p: &PeriodicSurface, wi: DVec3) -> &GratingCell {
+        let n = self.cells_per_axis;
+        let index = |x: f64| (((x + 1.0) * 0.5 * n as f64) as usize).min(n - 1);
+        let (ix, iy) = (index(wi.x), index(wi.y));
+        self.cells[iy * n + ix].get_or_init(|| {
+            let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / n as f64;
+            let (mut x, mut y) = (centre(ix), centre(iy));
+            // Corner cells reach outside the disk: their centre moves onto
+            // the rim.
+            let (r, r_max) = (
+                (x * x + y * y).sqrt(),
+                (1.0 - GRATING_RIM_COS.powi(2)).sqrt(),
+            );
+            if r > r_max {
+                x *= r_max / r;
+                y *= r_max / r;
+            }
+            let wi_centre = DVec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt());
+            let weights = self.cell_weights(p, wi_centre);
+            let rgb = Arc::new(vec![self.rainbow(brdf, p, wi_centre.z, &weights)]);
+            GratingCell { weights, rgb }
+        })
+    }
+
+    /// Weights at the cell centre wi of every order that propagates for
+    /// some incident direction of the cell (its centre direction is then
+    /// within the cell's half diagonal of the disk): exact at every
+    /// RAINBOW_WEIGHT_STEP-th node and interpolated linearly in between
+    /// where both neighbours carry weight (|c_n|^2 and G vary slowly over
+    /// a few bins), exact elsewhere.
+    fn cell_weights(&self, p: &PeriodicSurface, wi: DVec3) -> Vec<f32> {
+        let (lo, bins, n_max) = (RGB_BAND_NM.0, self.bins, self.n_max);
+        let (bin_nm, stride) = (self.bin_nm(), bins + 1);
+        let period_nm = 1000.0 * p.period_um();
+        let margin = std::f64::consts::SQRT_2 / self.cells_per_axis as f64;
+        let half = (1.0 - wi.y * wi.y).max(0.0).sqrt() + margin;
+        let propagating = |i: usize| {
+            let scale = period_nm / (lo + i as f64 * bin_nm);
+            let first = (((-wi.x - half) * scale).ceil() as i64).max(-n_max);
+            let last = (((-wi.x + half) * scale).floor() as i64).min(n_max);
+            first..=last
+        };
+        let weight_at = |n: i64, i: usize| {
+            let lambda = lo + i as f64 * bin_nm;
+            let u_n = n as f64 * lambda / period_nm;
+            let wo = rim_direction(wi, u_n);
+            order_weight(wi, wo, lambda, 1.0, |beta| p.order_power(n, beta))
+        };
+        let orders = (2 * n_max + 1) as usize;
+        let mut w = vec![0.0; orders * stride];
+        let coarse = |i: usize| i.is_multiple_of(RAINBOW_WEIGHT_STEP) || i == bins;
+        for i in (0..stride).filter(|&i| coarse(i)) {
+            for n in propagating(i) {
+                w[(n + n_max) as usize * stride + i] = weight_at(n, i);
+            }
+        }
+        for i in (0..stride).filter(|&i| !coarse(i)) {
+            let i0 = i - i % RAINBOW_WEIGHT_STEP;
+            let i1 = (i0 + RAINBOW_WEIGHT_STEP).min(bins);
+            let t = (i - i0) as f64 / (i1 - i0) as f64;
+            for n in propagating(i) {
+                let row = (n + n_max) as usize * stride;
+                let (w0, w1) = (w[row + i0], w[row + i1]);
+                w[row + i] = if w0 > 0.0 && w1 > 0.0 {
+                    w0 + t * (w1 - w0)
+                } else {
+                    weight_at(n, i)
+                };
+            }
+        }
+        w.into_iter().map(|x| x as f32).collect()
+    }
+
+    /// The RGB strategy: per order n, y_n(lambda_i) = band density x F^2 x
+    /// weight at the wavelength nodes, linear in between; the rainbows (n !=
+    /// 0) fall to 0 at the band ends so that the density stays continuous
+    /// in (u, v).
+    fn rainbow(&self, brdf: &Brdf, p: &PeriodicSurface, cos_i: f64, w: &[f32]) -> Component {
+        let (lo, bins, n_max) = (RGB_BAND_NM.0, self.bins, self.n_max);
+        let (bin_nm, stride) = (self.bin_nm(), bins + 1);
+        let orders = (2 * n_max + 1) as usize;
+        let band_density = rainbow_band_density(bins);
+        let mut y = vec![0.0; orders * stride];
+        for i in 0..stride {
+            let band = band_density[i] * brdf.fresnel.reflectance(cos_i, lo + i as f64 * bin_nm);
+            if !(band > 0.0) {
+                continue;
+            }
+            for row in 0..orders {
+                if row as i64 != n_max && (i == 0 || i == bins) {
+                    continue;
+                }
+                y[row * stride + i] = band * w[row * stride + i] as f64;
+            }
+        }
+        let mut cell = vec![0.0; orders * stride];
+        for row in 0..orders {
+            let r = row * stride;
+            if row as i64 == n_max {
+                for i in 0..stride {
+                    let end = if i == 0 || i == bins { 0.5 } else { 1.0 };
+                    cell[r + i] = end * bin_nm * y[r + i];
+                }
+            } else {
+                for i in 0..bins {
+                    cell[r + i] = 0.5 * bin_nm * (y[r + i] + y[r + i + 1]);
+                }
+            }
+        }
+        let total: f64 = cell.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return Component::cosine_only();
+        }
+        y.iter_mut().for_each(|p| *p /= total);
+        let row0 = n_max as usize * stride;
+        let zero_order = cell[row0..row0 + stride]
+            .iter()
+            .map(|p| p / total)
+            .collect();
+        let mut acc = 0.0;
+        let cdf = cell
+            .iter()
+            .map(|p| {
+                acc += p / total;
+                acc
+            })
+            .collect();
+        Component::new(
+            0.0,
+            1.0,
+            Some(Lobe::Rainbow(RainbowLobe {
+                period_nm: 1000.0 * p.period_um(),
+                coherence_um: p.coherence_um(),
+                bins,
+                bin_nm,
+                n_max,
+                y,
+                cdf,
+                zero_order,
+            })),
+        )
+    }
+
+    /// Order n's weight at lambda_nm from the cell's nodes (0 outside the
+    /// tabulated orders).
+    fn weight(&self, cell: &GratingCell, n: i64, lambda_nm: f64) -> f64 {
+        if n.abs() > self.n_max {
+            return 0.0;
+        }
+        let x = ((lambda_nm - RGB_BAND_NM.0) / self.bin_nm()).clamp(0.0, self.bins as f64);
+        let i = (x as usize).min(self.bins - 1);
+        let f = x - i as f64;
+        let row = (n + self.n_max) as usize * (self.bins + 1);
+        let (w0, w1) = (
+            cell.weights[row + i] as f64,
+            cell.weights[row + i + 1] as f64,
+        );
+        w0 + f * (w1 - w0)
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        let cell = |c: &GratingCell| {
+            c.weights.len() * 4
+                + match c.rgb.first().and_then(|c| c.lobe.as_ref()) {
+                    Some(Lobe::Rainbow(r)) => (r.y.len() + r.cdf.len() + r.zero_order.len()) * 8,
+                    _ => 0,
+                }
+        };
+        self.cells.len() * std::mem::size_of::<OnceLock<GratingCell>>()
+            + self
+                .cells
+                .iter()
+                .filter_map(|c| c.get())
+                .map(cell)
+                .sum::<usize>()
+    }
+}
+
+/// A grating, one wavelength: the orders propagating for wi (centre
+/// direction above the horizon), weighted by the table's weights
+/// (`order_weight` where the table has none), each a Gaussian of sd
+/// 1 / (sqrt(2) k l) in u and v.
+fn grating_component(brdf: &Brdf, p: &PeriodicSurface, wi: DVec3, lambda_nm: f64) -> Component {
+    let Some(table) = brdf.grating_table(p) else {
+        return Component::cosine_only();
+    };
     let k = wavenumber_per_um(lambda_nm);
-    let du = lambda_nm / (1000.0 * period_um);
-    let sigma = 1.0 / (std::f64::consts::SQRT_2 * k * coherence_um);
+    let du = lambda_nm / (1000.0 * p.period_um());
+    let sigma = 1.0 / (std::f64::consts::SQRT_2 * k * p.coherence_um());
     // Centres inside the unit disk: |-wi.x - n du| < sqrt(1 - wi.y^2).
     let half = (1.0 - wi.y * wi.y).max(0.0).sqrt();
     let n_lo = ((-wi.x - half) / du).ceil();
@@ -1045,12 +1305,18 @@ fn grating_component(
         return Component::cosine_only();
     }
     let (n_lo, n_hi) = (n_lo as i64, n_hi as i64);
-    let reflectance = brdf.fresnel.reflectance(wi.z, lambda_nm);
+    let cell = table.cell(brdf, p, wi);
     let mut prob: Vec<f64> = (n_lo..=n_hi)
         .map(|n| {
-            order_weight(wi, n as f64 * du, lambda_nm, reflectance, |beta| {
-                order_power(n, beta)
-            })
+            let w = table.weight(cell, n, lambda_nm);
+            if w > 0.0 {
+                w
+            } else {
+                let wo = uv_to_direction(wi, n as f64 * du, 0.0);
+                wo.map_or(0.0, |wo| {
+                    order_weight(wi, wo, lambda_nm, 1.0, |beta| p.order_power(n, beta))
+                })
+            }
         })
         .collect();
     let total: f64 = prob.iter().sum();
@@ -1070,135 +1336,32 @@ fn grating_component(
     )
 }
 
-/// RGB mode of a grating: per order, y_n(lambda_i) = band_density *
-/// `order_weight` at the wavelength nodes, interpolated linearly.
-fn rainbow_grating_component(
-    brdf: &Brdf,
-    wi: DVec3,
-    period_um: f64,
-    coherence_um: f64,
-    order_power: &dyn Fn(i64, f64) -> f64,
-) -> Component {
-    let (lo, hi) = RGB_BAND_NM;
-    // |u| <= 2 bounds every propagating order.
-    let n_max_f = (2.0 * 1000.0 * period_um / lo).floor();
-    if !(0.0..1e6).contains(&n_max_f) {
-        return Component::cosine_only();
+/// Direction of a grating order's centre (u, v) = (u_n, 0) for wi, moved
+/// onto the rim (cosine GRATING_RIM_COS) when it is below it.
+fn rim_direction(wi: DVec3, u_n: f64) -> DVec3 {
+    let (mut x, mut y) = (-wi.x - u_n, -wi.y);
+    let (r, r_max) = (
+        (x * x + y * y).sqrt(),
+        (1.0 - GRATING_RIM_COS.powi(2)).sqrt(),
+    );
+    if r > r_max {
+        x *= r_max / r;
+        y *= r_max / r;
     }
-    let n_max = n_max_f as i64;
-    let half = (1.0 - wi.y * wi.y).max(0.0).sqrt();
-    let orders = (2 * n_max + 1) as usize;
-    let bins = (RAINBOW_MAX_CELLS / orders).clamp(1, RAINBOW_MAX_BINS);
-    let bin_nm = (hi - lo) / bins as f64;
-    let stride = bins + 1;
-    let period_nm = 1000.0 * period_um;
-    // Order weights (without the band density): exact at every
-    // RAINBOW_WEIGHT_STEP-th node, interpolated linearly in between where
-    // both neighbours carry weight (they are a heuristic: the pdf is exact
-    // for whatever y is; |c_n|^2 and G vary slowly over a few bins), exact
-    // elsewhere (orders appearing over the horizon between two nodes).
-    let propagating = |i: usize| {
-        let scale = period_nm / (lo + i as f64 * bin_nm);
-        let first = (((-wi.x - half) * scale).ceil() as i64).max(-n_max);
-        let last = (((-wi.x + half) * scale).floor() as i64).min(n_max);
-        first..=last
-    };
-    let weight_at = |n: i64, i: usize| {
-        let lambda = lo + i as f64 * bin_nm;
-        let u_n = n as f64 * lambda / period_nm;
-        order_weight(wi, u_n, lambda, 1.0, |beta| order_power(n, beta))
-    };
-    let mut w = vec![0.0; orders * stride];
-    let coarse = |i: usize| i.is_multiple_of(RAINBOW_WEIGHT_STEP) || i == bins;
-    for i in (0..stride).filter(|&i| coarse(i)) {
-        for n in propagating(i) {
-            w[(n + n_max) as usize * stride + i] = weight_at(n, i);
-        }
-    }
-    for i in (0..stride).filter(|&i| !coarse(i)) {
-        let i0 = i - i % RAINBOW_WEIGHT_STEP;
-        let i1 = (i0 + RAINBOW_WEIGHT_STEP).min(bins);
-        let t = (i - i0) as f64 / (i1 - i0) as f64;
-        for n in propagating(i) {
-            let row = (n + n_max) as usize * stride;
-            let (w0, w1) = (w[row + i0], w[row + i1]);
-            w[row + i] = if w0 > 0.0 && w1 > 0.0 {
-                w0 + t * (w1 - w0)
-            } else {
-                weight_at(n, i)
-            };
-        }
-    }
-    let mut y = vec![0.0; orders * stride];
-    for i in 0..stride {
-        let lambda = lo + i as f64 * bin_nm;
-        let band = rainbow_band_density(bins)[i] * brdf.fresnel.reflectance(wi.z, lambda);
-        if !(band > 0.0) {
-            continue;
-        }
-        // Only orders whose centre is above the horizon for this wi:
-        // |-wi.x - n lambda / Lam| < sqrt(1 - wi.y^2). The rainbows (n != 0)
-        // fall to 0 at the band ends so that the density stays continuous
-        // in (u, v).
-        for n in propagating(i) {
-            if n != 0 && (i == 0 || i == bins) {
-                continue;
-            }
-            let k = (n + n_max) as usize * stride + i;
-            y[k] = band * w[k];
-        }
-    }
-    let mut cell = vec![0.0; orders * stride];
-    for row in 0..orders {
-        let r = row * stride;
-        if row as i64 == n_max {
-            for i in 0..stride {
-                let end = if i == 0 || i == bins { 0.5 } else { 1.0 };
-                cell[r + i] = end * bin_nm * y[r + i];
-            }
-        } else {
-            for i in 0..bins {
-                cell[r + i] = 0.5 * bin_nm * (y[r + i] + y[r + i + 1]);
-            }
-        }
-    }
-    let total: f64 = cell.iter().sum();
-    if !(total > 0.0 && total.is_finite()) {
-        return Component::cosine_only();
-    }
-    cell.iter_mut().for_each(|p| *p /= total);
-    y.iter_mut().for_each(|p| *p /= total);
-    Component::new(
-        0.0,
-        1.0,
-        Some(Lobe::Rainbow(RainbowLobe {
-            period_nm,
-            coherence_um,
-            bins,
-            bin_nm,
-            n_max,
-            y,
-            cell,
-        })),
-    )
+    DVec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt())
 }
 
-/// Weight of a grating order centred at (u, v) = (u_n, 0) at one
-/// wavelength: |c_n(k w)|^2 F^2 min(G / w^2, cap), 0 when evanescent. An
-/// estimate of the order's share of the albedo; `reflectance` is F^2 at the
-/// incidence cosine (its variation over the orders only costs variance, and
-/// one Fresnel evaluation per wavelength instead of per order keeps the RGB
-/// rainbow cheap to build).
+/// Weight of a grating order whose centre direction is wo, at one
+/// wavelength: |c_n(k w)|^2 F^2 min(G / w^2, cap). An estimate of the
+/// order's share of the albedo; `reflectance` is F^2 at the incidence cosine
+/// (its variation over the orders only costs variance).
 fn order_weight(
     wi: DVec3,
-    u_n: f64,
+    wo: DVec3,
     lambda_nm: f64,
     reflectance: f64,
     order_power: impl Fn(f64) -> f64,
 ) -> f64 {
-    let Some(wo) = uv_to_direction(wi, u_n, 0.0) else {
-        return 0.0;
-    };
     // G / w^2 of geometry::PairGeometry, for unit wi and wo.
     let one_plus_dot = 1.0 + wi.dot(wo);
     let w = wi.z + wo.z;
@@ -1278,6 +1441,21 @@ fn pick(prob: &[f64], t: f64) -> usize {
     }
     // Rounding left t above the total: the last non-zero entry.
     prob.iter().rposition(|&p| p > 0.0).unwrap_or(0)
+}
+
+/// Index i with cdf[i-1] <= t < cdf[i] (cdf non-decreasing, ending at ~1):
+/// never an entry of zero mass.
+fn pick_cdf(cdf: &[f64], t: f64) -> usize {
+    let i = cdf.partition_point(|&c| c <= t);
+    if i < cdf.len() {
+        return i;
+    }
+    // Rounding left t above the total: the last entry of non-zero mass.
+    let mut last = cdf.len().saturating_sub(1);
+    while last > 0 && !(cdf[last] > cdf[last - 1]) {
+        last -= 1;
+    }
+    last
 }
 
 /// Inverse of the standard normal CDF (Acklam's rational approximation,
@@ -1901,7 +2079,7 @@ mod tests {
         DirectionSampler {
             brdf,
             wi,
-            components: Rc::new(brdf.build_components(wi, lambda_nm)),
+            components: Arc::new(brdf.build_components(wi, lambda_nm)),
         }
     }
 
@@ -1915,7 +2093,7 @@ mod tests {
         let wi = incidences()[0].1;
         let good = brdf.sampler(wi, Some(550.0));
         let mut wide = uncached(&brdf, wi, Some(550.0));
-        match &mut Rc::get_mut(&mut wide.components).unwrap()[0].lobe {
+        match &mut Arc::get_mut(&mut wide.components).unwrap()[0].lobe {
             Some(Lobe::Series(s)) => {
                 s.k /= 1.04;
                 s.norm /= 1.04 * 1.04;
@@ -1930,7 +2108,7 @@ mod tests {
         let wi = incidences()[1].1;
         let good = smooth.sampler(wi, Some(550.0));
         let mut off = uncached(&smooth, wi, Some(550.0));
-        let components = Rc::get_mut(&mut off.components).unwrap();
+        let components = Arc::get_mut(&mut off.components).unwrap();
         components[0].p_coh *= 0.98;
         components[0].p_def += 0.02 * good.components[0].p_coh;
         let fit = chi2_fit_against(&good, &off, 6, CHI2_SAMPLES);
@@ -1942,7 +2120,7 @@ mod tests {
         let wi = incidences()[2].1;
         let good = brdf.sampler(wi, Some(450.0));
         let mut wide = uncached(&brdf, wi, Some(450.0));
-        match &mut Rc::get_mut(&mut wide.components).unwrap()[0].lobe {
+        match &mut Arc::get_mut(&mut wide.components).unwrap()[0].lobe {
             Some(Lobe::Horizon(horizon)) => horizon.s *= 1.25,
             _ => panic!("expected the near-horizon lobe at grazing incidence"),
         }
