@@ -158,16 +158,16 @@ struct Batch {
     std::vector<float> f;      // nc * n: f(wi, wo), NOT multiplied by cos
     std::vector<float> pdf;    // n: pdf(wo), mixture over wavelengths
     std::vector<float> s_wo;   // 3 * n: sampled direction, core frame
-    std::vector<float> s_pdf;  // n: pdf of the sample (lobe probability if coherent)
+    std::vector<float> s_pdf;  // n: pdf of the sample (mixture probability if coherent)
     std::vector<float> s_coh;  // n: 1 if the coherent lobe was sampled
     std::vector<float> s_val;  // nc * n: f at s_wo, or coherent reflectance
 };
 
-/// Temporaries of one batch. Scalar variants keep one per thread, so that a
-/// call allocates nothing once the buffers have grown (a dozen malloc/free
-/// pairs per call were ~8% of a scalar render).
+/// Temporaries of one batch (AoS outputs of the core). Scalar variants keep
+/// one per thread, so that a call allocates nothing once the buffers have
+/// grown (a dozen malloc/free pairs per call were ~8% of a scalar render).
 struct Scratch {
-    std::vector<float> aos, lam0, wo, pdf0, f, R, pmix, t1, t2, t3;
+    std::vector<float> aos, wo, pdf, val;
     std::vector<uint8_t> coh;
 };
 
@@ -175,176 +175,57 @@ inline float luminance(const float *rgb) {
     return 0.212671f * rgb[0] + 0.715160f * rgb[1] + 0.072169f * rgb[2];
 }
 
-/// f (AoS out, nc per lane) and/or the mixture pdf at (wi, wo) for n lanes.
-void core_eval(const StamBrdf *core, Channels ch, size_t nw, size_t n,
-               const float *wi, const float *wo, const float *lam,
-               float *f_aos, float *pdf, Scratch &tmp) {
-    if (n == 0)
+/// AoS (k per lane) -> SoA; Mono takes the luminance of the core's RGB.
+void to_soa(const float *aos, size_t n, size_t k, Channels ch, float *soa) {
+    if (ch == Channels::Mono) {
+        for (size_t i = 0; i < n; ++i)
+            soa[i] = luminance(aos + 3 * i);
         return;
-    switch (ch) {
-        case Channels::Rgb:
-            if (f_aos)
-                stam_brdf_eval_rgb(core, n, wi, wo, f_aos);
-            if (pdf)
-                stam_brdf_pdf(core, n, wi, wo, nullptr, pdf);
-            break;
-        case Channels::Mono:
-            if (f_aos) {
-                std::vector<float> &rgb = tmp.t1;
-                rgb.resize(3 * n);
-                stam_brdf_eval_rgb(core, n, wi, wo, rgb.data());
-                for (size_t i = 0; i < n; ++i)
-                    f_aos[i] = luminance(&rgb[3 * i]);
-            }
-            if (pdf)
-                stam_brdf_pdf(core, n, wi, wo, nullptr, pdf);
-            break;
-        case Channels::Spectral: {
-            // One (wi, wo, lambda) triple per lane and wavelength
-            size_t m = n * nw;
-            std::vector<float> &wi_r = tmp.t1, &wo_r = tmp.t2, &p = tmp.t3;
-            wi_r.resize(3 * m);
-            wo_r.resize(3 * m);
-            for (size_t i = 0; i < n; ++i)
-                for (size_t j = 0; j < nw; ++j)
-                    for (size_t c = 0; c < 3; ++c) {
-                        wi_r[3 * (i * nw + j) + c] = wi[3 * i + c];
-                        wo_r[3 * (i * nw + j) + c] = wo[3 * i + c];
-                    }
-            if (f_aos)
-                stam_brdf_eval_spectral(core, m, wi_r.data(), wo_r.data(), lam, f_aos);
-            if (pdf) {
-                p.resize(m);
-                stam_brdf_pdf(core, m, wi_r.data(), wo_r.data(), lam, p.data());
-                for (size_t i = 0; i < n; ++i) {
-                    float s = 0.f;
-                    for (size_t j = 0; j < nw; ++j)
-                        s += p[i * nw + j];
-                    pdf[i] = s / (float) nw;
-                }
-            }
-            break;
-        }
     }
-}
-
-/// Coherent reflectance (AoS out, nc per lane).
-void core_coherent(const StamBrdf *core, Channels ch, size_t nw, size_t n,
-                   const float *wi, const float *lam, float *out, Scratch &tmp) {
-    if (n == 0)
-        return;
-    switch (ch) {
-        case Channels::Rgb:
-            stam_brdf_coherent_rgb(core, n, wi, out);
-            break;
-        case Channels::Mono: {
-            std::vector<float> &rgb = tmp.t1;
-            rgb.resize(3 * n);
-            stam_brdf_coherent_rgb(core, n, wi, rgb.data());
-            for (size_t i = 0; i < n; ++i)
-                out[i] = luminance(&rgb[3 * i]);
-            break;
-        }
-        case Channels::Spectral: {
-            size_t m = n * nw;
-            std::vector<float> &wi_r = tmp.t1;
-            wi_r.resize(3 * m);
-            for (size_t i = 0; i < n; ++i)
-                for (size_t j = 0; j < nw; ++j)
-                    for (size_t c = 0; c < 3; ++c)
-                        wi_r[3 * (i * nw + j) + c] = wi[3 * i + c];
-            stam_brdf_coherent_spectral(core, m, wi_r.data(), lam, out);
-            break;
-        }
-    }
-}
-
-/// AoS (nc per lane) -> SoA
-void aos_to_soa(const float *aos, size_t n, size_t k, float *soa) {
     for (size_t i = 0; i < n; ++i)
         for (size_t c = 0; c < k; ++c)
             soa[c * n + i] = aos[i * k + c];
 }
 
-/// Run every requested query of a batch through the core.
+/// Run every requested query of a batch through the core's path-vertex
+/// calls: spectral lanes pass their nw wavelengths (the core samples with
+/// one of them and returns the mixture density over all, see stam.h); RGB
+/// and Mono lanes pass none (Mono is the luminance of RGB).
 void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b, Scratch &tmp) {
-    const size_t n = b.n, nc = ch == Channels::Rgb ? 3 : (ch == Channels::Mono ? 1 : nw);
-    const float *lam = ch == Channels::Spectral ? b.lam.data() : nullptr;
-    std::vector<float> &aos = tmp.aos;
+    const size_t n = b.n;
+    const bool spectral = ch == Channels::Spectral;
+    const float *lam = spectral ? b.lam.data() : nullptr;
+    const size_t core_nw = spectral ? nw : 0,
+                 core_nc = spectral ? nw : 3,        // floats per lane from the core
+                 nc = ch == Channels::Mono ? 1 : core_nc;
 
     if (b.want_f || b.want_pdf) {
-        if (b.want_f)
-            aos.assign(nc * n, 0.f);
+        tmp.aos.resize(core_nc * n);
         b.pdf.assign(n, 0.f);
-        core_eval(core, ch, nw, n, b.wi.data(), b.wo.data(), lam,
-                  b.want_f ? aos.data() : nullptr, b.want_pdf ? b.pdf.data() : nullptr, tmp);
+        stam_brdf_eval_pdf_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw,
+                                  b.want_f ? tmp.aos.data() : nullptr,
+                                  b.want_pdf ? b.pdf.data() : nullptr);
         if (b.want_f) {
             b.f.resize(nc * n);
-            aos_to_soa(aos.data(), n, nc, b.f.data());
+            to_soa(tmp.aos.data(), n, core_nc, ch, b.f.data());
         }
     }
 
     if (b.want_sample) {
-        // Spectral: a "hero" wavelength picked uniformly among the lane's nw
-        // wavelengths by the first uniform (rescaled for the core's own lobe
-        // choice), so the strategy's density is exactly the average of the
-        // per-wavelength densities whatever wavelengths Mitsuba assigned.
-        // RGB: NULL = the core's mixture over the visible band.
-        std::vector<float> &lam0 = tmp.lam0;
-        lam0.clear();
-        if (ch == Channels::Spectral && nw > 0) {
-            lam0.resize(n);
-            for (size_t i = 0; i < n; ++i) {
-                float &r0 = b.rnd[3 * i];
-                float scaled = r0 * (float) nw;
-                size_t hero = std::min((size_t) scaled, nw - 1);
-                r0 = std::min(scaled - (float) hero, 0.99999994f);
-                lam0[i] = b.lam[i * nw + hero];
-            }
-        }
-        std::vector<float> &wo = tmp.wo, &pdf0 = tmp.pdf0;
-        std::vector<uint8_t> &coh = tmp.coh;
-        wo.assign(3 * n, 0.f);
-        pdf0.assign(n, 0.f);
-        coh.assign(n, 0);
-        if (n)
-            stam_brdf_sample(core, n, b.wi.data(), lam0.empty() ? nullptr : lam0.data(),
-                             b.rnd.data(), wo.data(), pdf0.data(), coh.data());
-        size_t coherent_lanes = 0;
-        for (size_t i = 0; i < n; ++i)
-            coherent_lanes += coh[i] != 0;
-
-        // f and the mixture pdf at the sampled direction (unless every lane
-        // chose the coherent lobe), coherent reflectance (only if one did)
-        std::vector<float> &f = tmp.f, &R = tmp.R, &pmix = tmp.pmix;
-        f.assign(nc * n, 0.f);
-        R.assign(nc * n, 0.f);
-        pmix.clear();
-        if (ch == Channels::Spectral)
-            pmix.assign(n, 0.f);
-        if (coherent_lanes < n)
-            core_eval(core, ch, nw, n, b.wi.data(), wo.data(), lam, f.data(),
-                      pmix.empty() ? nullptr : pmix.data(), tmp);
-        if (coherent_lanes > 0)
-            core_coherent(core, ch, nw, n, b.wi.data(), lam, R.data(), tmp);
-
+        tmp.wo.resize(3 * n);
+        tmp.pdf.resize(n);
+        tmp.coh.resize(n);
+        tmp.val.resize(core_nc * n);
+        stam_brdf_sample_vertex(core, n, b.wi.data(), lam, core_nw, b.rnd.data(),
+                                tmp.wo.data(), tmp.pdf.data(), tmp.coh.data(), tmp.val.data());
         b.s_wo.resize(3 * n);
-        aos_to_soa(wo.data(), n, 3, b.s_wo.data());
-        b.s_pdf.resize(n);
+        to_soa(tmp.wo.data(), n, 3, Channels::Rgb, b.s_wo.data());
+        b.s_pdf.assign(tmp.pdf.begin(), tmp.pdf.end());
         b.s_coh.resize(n);
+        for (size_t i = 0; i < n; ++i)
+            b.s_coh[i] = tmp.coh[i] ? 1.f : 0.f;
         b.s_val.resize(nc * n);
-        for (size_t i = 0; i < n; ++i) {
-            bool c = coh[i] != 0;
-            b.s_coh[i] = c ? 1.f : 0.f;
-            // Coherent: the lobe's discrete probability for the wavelength
-            // used (unbiased given that wavelength). Glossy: mixture density.
-            b.s_pdf[i] = (c || pmix.empty()) ? pdf0[i] : pmix[i];
-            if (!(pdf0[i] > 0.f))
-                b.s_pdf[i] = 0.f;
-            const float *src = c ? &R[i * nc] : &f[i * nc];
-            for (size_t k = 0; k < nc; ++k)
-                b.s_val[k * n + i] = src[k];
-        }
+        to_soa(tmp.val.data(), n, core_nc, ch, b.s_val.data());
     }
 }
 

@@ -2,13 +2,16 @@
 //! ABI, against Cook-Torrance doing the same work, in one process.
 //!
 //! A path tracer's vertex (Mitsuba's `eval_pdf_sample`) is: f and pdf towards
-//! the sampled light, one BSDF sample, f (and in spectral mode the mixture
-//! pdf) at the sampled direction. The plugin calls the core exactly so
-//! (mitsuba-plugin/diffraction.cpp, run_batch); this replays that sequence
-//! for the render benchmark's materials (scripts/bench_render.py), so that
-//! changes to the core can be measured in seconds instead of renders.
+//! the sampled light, then one BSDF sample with f (and the pdf) at the
+//! sampled direction. The plugin makes exactly these two calls
+//! (stam_brdf_eval_pdf_vertex, stam_brdf_sample_vertex; see
+//! mitsuba-plugin/diffraction.cpp); this replays them for the render
+//! benchmark's materials (scripts/bench_render.py) with random incident
+//! directions (a render's are more coherent, so caches fare better there),
+//! so that changes to the core can be measured in seconds instead of
+//! renders.
 //!
-//! Usage: cargo run --release -p stam-core --example vertex_cost [vertices] [filter] [rgb|spectral]
+//! Usage: cargo run --release -p stam-core --example vertex_cost [vertices] [filter] [rgb|spectral|all] [separate]
 
 use stam::benchmark::{cook_torrance_beckmann, SplitMix64};
 use stam::ffi::*;
@@ -163,6 +166,42 @@ unsafe fn vertex_spectral(b: *const StamBrdf, v: &Vertex) -> f32 {
     f[0] + p[0] + spdf + g[0] + q[0]
 }
 
+/// One vertex through the vertex ABI (what the plugin calls): f and pdf
+/// towards the light, then a sample with its value, for RGB (nw = 0) or
+/// the path's wavelengths.
+unsafe fn vertex_fused(b: *const StamBrdf, v: &Vertex, nw: usize) -> f32 {
+    let lam = if nw == 0 {
+        std::ptr::null()
+    } else {
+        v.lambda_nm.as_ptr()
+    };
+    let (mut f, mut pdf) = ([0f32; 4], 0f32);
+    stam_brdf_eval_pdf_vertex(
+        b,
+        1,
+        v.wi.as_ptr(),
+        v.wo_light.as_ptr(),
+        lam,
+        nw,
+        f.as_mut_ptr(),
+        &mut pdf,
+    );
+    let (mut wo, mut spdf, mut coh, mut value) = ([0f32; 3], 0f32, 0u8, [0f32; 4]);
+    stam_brdf_sample_vertex(
+        b,
+        1,
+        v.wi.as_ptr(),
+        lam,
+        nw,
+        v.rnd.as_ptr(),
+        wo.as_mut_ptr(),
+        &mut spdf,
+        &mut coh,
+        value.as_mut_ptr(),
+    );
+    f[0] + pdf + spdf + value[0]
+}
+
 /// Cook-Torrance (Beckmann, alpha 0.25, aluminium-like index) doing a
 /// vertex's work: f and a Beckmann pdf at the light, a half-vector sample, f
 /// at the sample; `channels` evaluations of f each (3 RGB, 4 spectral).
@@ -192,6 +231,9 @@ fn main() {
     let filter = args.get(2).cloned().unwrap_or_default();
     let mode = args.get(3).cloned().unwrap_or_default();
     let (do_rgb, do_spectral) = (mode != "spectral", mode != "rgb");
+    // "separate": also the per-query calls the plugin made before the
+    // vertex ABI (eval, pdf, sample, eval again; per wavelength).
+    let separate = args.get(4).is_some_and(|a| a == "separate");
     let verts = vertices(count);
     let time = |f: &mut dyn FnMut() -> f32| {
         // Best of 3: the machine is shared.
@@ -229,10 +271,21 @@ fn main() {
         }
         let (mut rgb, mut spec) = (f64::NAN, f64::NAN);
         if do_rgb {
-            rgb = time(&mut || verts.iter().map(|v| unsafe { vertex_rgb(b, v) }).sum());
+            rgb = time(&mut || verts.iter().map(|v| unsafe { vertex_fused(b, v, 0) }).sum());
         }
         if do_spectral {
-            spec = time(&mut || verts.iter().map(|v| unsafe { vertex_spectral(b, v) }).sum());
+            spec = time(&mut || {
+                verts
+                    .iter()
+                    .map(|v| unsafe { vertex_fused(b, v, PATH_WAVELENGTHS) })
+                    .sum()
+            });
+        }
+        if separate {
+            let old_rgb = time(&mut || verts.iter().map(|v| unsafe { vertex_rgb(b, v) }).sum());
+            let old_spec =
+                time(&mut || verts.iter().map(|v| unsafe { vertex_spectral(b, v) }).sum());
+            println!("{name:<18} separate calls: {old_rgb:.0} ns RGB, {old_spec:.0} ns spectral");
         }
         println!(
             "{name:<18} {rgb:>10.0} {:>7.1}x {spec:>14.0} {:>7.1}x",

@@ -85,6 +85,29 @@ void stam_brdf_coherent_probability(const StamBrdf *b, size_t n, const float *wi
  * wavelength's pdf alone is unbiased too but has a large variance where the
  * other wavelengths' lobes lie (diffraction orders move with lambda). */
 
+/* Path-vertex queries: what a path tracer asks at one vertex, each in one
+ * call, for paths carrying nw wavelengths (lambda_nm: nw per lane,
+ * lane-major, 1 <= nw <= 64) or RGB (lambda_nm = NULL, nw ignored). A lane
+ * has nc values: nw, or 3 for RGB. The sampling strategy is, for nw
+ * wavelengths, the one-sample mixture described above (the core picks the
+ * sampling wavelength with rnd[0]); for RGB, stam_brdf_sample's RGB mode.
+ *
+ * eval_pdf: f (nc per lane, without cos and the coherent lobe; NULL to
+ * skip) and pdf (the strategy's solid-angle density at wo; NULL to skip).
+ *
+ * sample: wo, pdf, coherent as in stam_brdf_sample, and value (nc per lane,
+ * NULL to skip): f at wo for a glossy sample, whose pdf is the strategy's
+ * density at the returned wo (stam_brdf_eval_pdf_vertex's pdf there); the
+ * coherent lobe's reflectance for a coherent one, whose pdf is the
+ * strategy's probability of that lobe. So the sample's weight is
+ * value cos(theta_o) / pdf (glossy) or value / pdf (coherent). A failed
+ * sample has pdf 0 and value 0. */
+void stam_brdf_eval_pdf_vertex(const StamBrdf *b, size_t n, const float *wi, const float *wo,
+                               const float *lambda_nm, size_t nw, float *f, float *pdf);
+void stam_brdf_sample_vertex(const StamBrdf *b, size_t n, const float *wi,
+                             const float *lambda_nm, size_t nw, const float *rnd, float *wo,
+                             float *pdf, uint8_t *coherent, float *value);
+
 /* Flags describing the material, for renderers. */
 #define STAM_FLAG_HAS_COHERENT 1u   /* a coherent delta lobe can be non-zero */
 #define STAM_FLAG_ANISOTROPIC 2u    /* f depends on the azimuth of the frame */

@@ -53,6 +53,9 @@ pub struct Brdf {
     /// Periodic surfaces: the sampling strategy's order weights over the
     /// incident direction, made on the first sample.
     pub(crate) grating_table: std::sync::OnceLock<Option<crate::sampling::GratingTable>>,
+    /// Gaussian and fractal surfaces: sampling strategies over the incidence
+    /// cosine and the wavelength, made on the first sample.
+    pub(crate) component_table: std::sync::OnceLock<crate::sampling::ComponentTable>,
     /// Gaussian surfaces: the kernel at every node of the rule over the
     /// pair variables, built on the first RGB evaluation (spectral-only use
     /// never pays for it); None when the material does not use tables.
@@ -219,6 +222,7 @@ impl Brdf {
             id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             sampling_albedo: std::sync::OnceLock::new(),
             grating_table: std::sync::OnceLock::new(),
+            component_table: std::sync::OnceLock::new(),
             rgb_table: std::sync::OnceLock::new(),
         })
     }
@@ -242,6 +246,7 @@ impl Brdf {
         std::mem::size_of::<Brdf>()
             + self.rgb_rule.memory_bytes()
             + self.sampling_albedo.get().map_or(0, |t| t.memory_bytes())
+            + self.component_table.get().map_or(0, |t| t.memory_bytes())
             + self
                 .grating_table
                 .get()
@@ -285,10 +290,19 @@ impl Brdf {
         let Some(geom) = PairGeometry::new(wi, wo) else {
             return 0.0;
         };
+        self.eval_spectral_at(&geom, lambda_nm)
+    }
+
+    /// `eval_spectral` for a pair whose geometry is known (several
+    /// wavelengths of one pair share it).
+    pub fn eval_spectral_at(&self, geom: &PairGeometry, lambda_nm: f64) -> f64 {
+        if !in_band(lambda_nm) {
+            return 0.0;
+        }
         let k = wavenumber_per_um(lambda_nm);
         let f = self.fresnel.reflectance(geom.cos_half, lambda_nm)
             * geom.geometric_factor
-            * self.kernel(k, &geom);
+            * self.kernel(k, geom);
         finite_non_negative(f)
     }
 

@@ -6,6 +6,7 @@
 //! the panic message).
 
 use crate::brdf::Brdf;
+use crate::vertex::Channels;
 use glam::DVec3;
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -304,6 +305,173 @@ pub unsafe extern "C" fn stam_brdf_coherent_probability(
         let p = brdf.coherent_probability(direction(wi, i), optional_lambda(lambda_nm, i));
         o[0] = to_output(p);
     });
+}
+
+/// Most wavelengths per path the vertex queries take (more are refused:
+/// outputs zeroed).
+pub const MAX_PATH_WAVELENGTHS: usize = 64;
+
+/// Lane i's channels: RGB for NULL wavelengths, else its nw wavelengths
+/// (converted into `buf`).
+#[inline]
+unsafe fn lane_channels<'a>(
+    lambda_nm: *const f32,
+    nw: usize,
+    i: usize,
+    buf: &'a mut [f64; MAX_PATH_WAVELENGTHS],
+) -> Channels<'a> {
+    if lambda_nm.is_null() {
+        return Channels::Rgb;
+    }
+    let src = std::slice::from_raw_parts(lambda_nm.add(i * nw), nw);
+    for (b, &l) in buf.iter_mut().zip(src) {
+        *b = l as f64;
+    }
+    Channels::Wavelengths(&buf[..nw])
+}
+
+/// Channels per lane of the vertex queries: 3 (RGB) or nw; None when nw is
+/// out of range.
+fn channel_count(lambda_nm: *const f32, nw: usize) -> Option<usize> {
+    if lambda_nm.is_null() {
+        Some(3)
+    } else {
+        (1..=MAX_PATH_WAVELENGTHS).contains(&nw).then_some(nw)
+    }
+}
+
+/// # Safety
+/// wi, wo hold 3n floats; lambda_nm NULL (RGB) or n * nw floats; f NULL or
+/// n * nc floats (nc = 3 or nw), pdf NULL or n floats; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_eval_pdf_vertex(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    wo: *const f32,
+    lambda_nm: *const f32,
+    nw: usize,
+    f: *mut f32,
+    pdf: *mut f32,
+) {
+    if n == 0 {
+        return;
+    }
+    let nc = channel_count(lambda_nm, nw);
+    let zero = || {
+        if !f.is_null() {
+            std::slice::from_raw_parts_mut(f, n * nc.unwrap_or(0)).fill(0.0);
+        }
+        if !pdf.is_null() {
+            std::slice::from_raw_parts_mut(pdf, n).fill(0.0);
+        }
+    };
+    let Some(nc) = nc else {
+        return zero();
+    };
+    if b.is_null() || wi.is_null() || wo.is_null() {
+        return zero();
+    }
+    let brdf = &(*b).brdf;
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        let mut buf = [0.0; MAX_PATH_WAVELENGTHS];
+        let mut values = [0.0; MAX_PATH_WAVELENGTHS];
+        for i in 0..n {
+            let channels = lane_channels(lambda_nm, nw, i, &mut buf);
+            let (wi, wo) = (direction(wi, i), direction(wo, i));
+            if !f.is_null() {
+                brdf.eval_channels(wi, wo, channels, &mut values);
+                let out = std::slice::from_raw_parts_mut(f.add(i * nc), nc);
+                for (o, &v) in out.iter_mut().zip(&values) {
+                    *o = to_output(v);
+                }
+            }
+            if !pdf.is_null() {
+                *pdf.add(i) = to_output(brdf.pdf_channels(wi, wo, channels));
+            }
+        }
+    }));
+    if result.is_err() {
+        zero();
+    }
+}
+
+/// # Safety
+/// wi, rnd and wo hold 3n floats; lambda_nm NULL (RGB) or n * nw floats;
+/// pdf n floats; coherent NULL or n bytes; value NULL or n * nc floats (nc
+/// = 3 or nw); `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_sample_vertex(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    lambda_nm: *const f32,
+    nw: usize,
+    rnd: *const f32,
+    wo: *mut f32,
+    pdf: *mut f32,
+    coherent: *mut u8,
+    value: *mut f32,
+) {
+    if n == 0 {
+        return;
+    }
+    let nc = channel_count(lambda_nm, nw);
+    let zero = || {
+        if !wo.is_null() {
+            std::slice::from_raw_parts_mut(wo, 3 * n).fill(0.0);
+        }
+        if !pdf.is_null() {
+            std::slice::from_raw_parts_mut(pdf, n).fill(0.0);
+        }
+        if !coherent.is_null() {
+            std::slice::from_raw_parts_mut(coherent, n).fill(0);
+        }
+        if !value.is_null() {
+            std::slice::from_raw_parts_mut(value, n * nc.unwrap_or(0)).fill(0.0);
+        }
+    };
+    let Some(nc) = nc else {
+        return zero();
+    };
+    if b.is_null() || wi.is_null() || rnd.is_null() || wo.is_null() || pdf.is_null() {
+        return zero();
+    }
+    let brdf = &(*b).brdf;
+    // The caller sees f32 directions: pdf and value are taken there.
+    let round = |w: DVec3| DVec3::new(w.x as f32 as f64, w.y as f32 as f64, w.z as f32 as f64);
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        let mut buf = [0.0; MAX_PATH_WAVELENGTHS];
+        let mut values = [0.0; MAX_PATH_WAVELENGTHS];
+        for i in 0..n {
+            let channels = lane_channels(lambda_nm, nw, i, &mut buf);
+            let r = std::slice::from_raw_parts(rnd.add(3 * i), 3);
+            let s = brdf.sample_channels(
+                direction(wi, i),
+                channels,
+                [r[0] as f64, r[1] as f64, r[2] as f64],
+                round,
+                &mut values,
+            );
+            let ok = s.pdf > 0.0;
+            let d = if ok { round(s.wo) } else { DVec3::ZERO };
+            std::slice::from_raw_parts_mut(wo.add(3 * i), 3)
+                .copy_from_slice(&[d.x as f32, d.y as f32, d.z as f32]);
+            *pdf.add(i) = to_output(s.pdf);
+            if !coherent.is_null() {
+                *coherent.add(i) = u8::from(ok && s.coherent);
+            }
+            if !value.is_null() {
+                let out = std::slice::from_raw_parts_mut(value.add(i * nc), nc);
+                for (o, &v) in out.iter_mut().zip(&values) {
+                    *o = if ok { to_output(v) } else { 0.0 };
+                }
+            }
+        }
+    }));
+    if result.is_err() {
+        zero();
+    }
 }
 
 /// # Safety

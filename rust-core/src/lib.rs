@@ -23,6 +23,7 @@ pub mod periodic;
 pub mod sampling;
 pub mod special;
 pub mod spectrum;
+pub mod vertex;
 
 pub use brdf::Brdf;
 pub use error::StamError;

@@ -71,6 +71,23 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     stam_brdf_pdf(b, N, wi, wo, NULL, pdf);
     CHECK(17, finite_nonneg(pdf, N), "RGB-mode pdf");
 
+    /* Path-vertex calls: 2 wavelengths per lane (the lanes' pairs above). */
+    {
+        const float lam2[2 * N] = {550.0f, 600.0f, 450.0f, 700.0f, 0.0f, 550.0f, NAN, 500.0f};
+        float f2[2 * N], p2[N], v2[2 * N], v3[3 * N];
+        stam_brdf_eval_pdf_vertex(b, N, wi, wo, lam2, 2, f2, p2);
+        CHECK(23, finite_nonneg(f2, 2 * N) && finite_nonneg(p2, N), "eval_pdf_vertex");
+        CHECK(24, f2[2] > 0.0f && f2[3] > 0.0f && p2[1] > 0.0f, "eval_pdf_vertex zero at mirror");
+        stam_brdf_eval_pdf_vertex(b, N, wi, wo, NULL, 0, v3, NULL);
+        CHECK(25, finite_nonneg(v3, 3 * N), "eval_pdf_vertex RGB");
+        stam_brdf_sample_vertex(b, N, wi, lam2, 2, rnd, wo_s, pdf, coherent, v2);
+        CHECK(26, finite_nonneg(pdf, N) && finite_nonneg(v2, 2 * N), "sample_vertex");
+        stam_brdf_sample_vertex(b, N, wi, NULL, 0, rnd, wo_s, pdf, NULL, v3);
+        CHECK(27, finite_nonneg(pdf, N) && finite_nonneg(v3, 3 * N), "sample_vertex RGB");
+        stam_brdf_sample_vertex(b, N, wi, lam2, 100, rnd, wo_s, pdf, coherent, NULL);
+        CHECK(28, pdf[0] == 0.0f && pdf[1] == 0.0f, "nw out of range must give zeros");
+    }
+
     uint32_t flags = stam_brdf_flags(b);
     CHECK(18, flags < 8u, "unknown flag bits %u", flags);
     CHECK(19, stam_brdf_memory_bytes(b) > 0 && stam_brdf_memory_bytes(b) <= (4u << 20), "memory");
