@@ -335,10 +335,8 @@ impl Brdf {
                     if !from_table {
                         s.kernel_at_wavenumbers(&rule.k_per_um, &rule.ln_k_per_um, &geom, values);
                     }
-                } else {
-                    for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
-                        *v = self.kernel(k, &geom);
-                    }
+                } else if let Surface::Fractal(s) = &self.surface {
+                    s.kernel_at_wavenumbers(&rule.k_per_um, &rule.ln_k_per_um, &geom, values);
                 }
                 self.rgb_rule
                     .integrate(&self.fresnel, geom.cos_half, values)

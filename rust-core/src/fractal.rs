@@ -54,6 +54,7 @@ mod math;
 mod tests;
 
 use crate::geometry::PairGeometry;
+use crate::special::fast_exp;
 use build::{hermite, hermite_deriv, ln_cell_mass, log_add};
 use math::{series_coefs, LN_2PI, LN_PI};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -92,6 +93,10 @@ struct ProfileData {
     y_last: f64,
     table: Vec<[f64; 2]>,
     cdf: Vec<[f64; 2]>,
+    /// d ln cdf/dy and d ln ccdf/dy at the nodes (the Hermite slopes of the
+    /// cdf columns; kept so that inverting the cdf, once per sample, needs
+    /// no exp).
+    cdf_slopes: Vec<[f64; 2]>,
     /// Large-x run-time series anchored at y_last:
     /// Phi = exp(ln_a1 - (alpha + 2) y) (1 + sum_j large_r[j-2] u^(j-1)),
     /// u = exp(-alpha (y - y_last)).
@@ -252,7 +257,7 @@ impl StableProfile {
         let d = &*self.inner;
         std::mem::size_of::<ProfileData>()
             + 8 * (d.small_c.capacity() + d.large_r.capacity())
-            + 16 * (d.table.capacity() + d.cdf.capacity())
+            + 16 * (d.table.capacity() + d.cdf.capacity() + d.cdf_slopes.capacity())
     }
 
     pub fn diagnostics(&self) -> ProfileDiagnostics {
@@ -285,6 +290,7 @@ impl ProfileData {
                 y_last: 0.0,
                 table: Vec::new(),
                 cdf: Vec::new(),
+                cdf_slopes: Vec::new(),
                 ln_a1: 0.0,
                 large_r: Vec::new(),
                 node_err: 1e-16,
@@ -342,6 +348,7 @@ impl ProfileData {
             y_last,
             table,
             cdf: vec![[0.0; 2]; n],
+            cdf_slopes: Vec::new(),
             ln_a1,
             large_r,
             node_err: tables.node_err,
@@ -373,6 +380,12 @@ impl ProfileData {
             .iter()
             .map(|c| (c[0].exp() + c[1].exp() - 1.0).abs())
             .fold(0.0, f64::max);
+        d.cdf_slopes = (0..n)
+            .map(|i| {
+                let m = d.table[i][0] + 2.0 * (y0 + i as f64 * h) - LN_2PI;
+                [(m - d.cdf[i][0]).exp(), -(m - d.cdf[i][1]).exp()]
+            })
+            .collect();
         Ok(d)
     }
 
@@ -491,9 +504,10 @@ impl ProfileData {
     }
 
     /// d ln cdf/dy and d ln ccdf/dy at node i.
-    fn cdf_derivs(&self, i: usize, yi: f64) -> (f64, f64) {
-        let m = self.table[i][0] + 2.0 * yi - LN_2PI;
-        ((m - self.cdf[i][0]).exp(), -(m - self.cdf[i][1]).exp())
+    #[inline]
+    fn cdf_derivs(&self, i: usize, _yi: f64) -> (f64, f64) {
+        let [c, cc] = self.cdf_slopes[i];
+        (c, cc)
     }
 
     /// y with ln cdf(y) = l (l <= ln 1/2).
@@ -730,6 +744,41 @@ impl FractalSurface {
             l.exp()
         } else {
             0.0
+        }
+    }
+
+    /// K at several wavenumbers (the RGB rule's nodes), sharing the pair's
+    /// logarithms: ln s and ln(k r) are affine in ln k, so each node costs
+    /// one profile lookup and one exp instead of two logarithms more.
+    /// Falls back to `kernel` per node where the fast path does not apply.
+    pub fn kernel_at_wavenumbers(
+        &self,
+        k_per_um: &[f64],
+        ln_k_per_um: &[f64],
+        geom: &PairGeometry,
+        out: &mut [f64],
+    ) {
+        let aw = geom.w.abs();
+        let r2 = geom.u * geom.u + geom.v * geom.v;
+        if !(aw.is_normal() && r2.is_normal()) {
+            for (o, &k) in out.iter_mut().zip(k_per_um) {
+                *o = self.kernel(k, geom);
+            }
+            return;
+        }
+        // ln s_j = -(2 ln k_j + 2 ln|w| + c) / alpha; y_j = ln k_j + ln r + ln s_j.
+        let ln_s0 = -self.inv_alpha * (2.0 * aw.ln() + self.ln_a_const);
+        let y0 = 0.5 * r2.ln() + ln_s0;
+        let inv_w2 = INV_4PI2 / (aw * aw);
+        for ((o, &k), &ln_k) in out.iter_mut().zip(k_per_um).zip(ln_k_per_um) {
+            let ln_s = ln_s0 - 2.0 * self.inv_alpha * ln_k;
+            let y = y0 + ln_k * (1.0 - 2.0 * self.inv_alpha);
+            let e = 2.0 * ln_s + self.profile.ln_phi_at_ln(y);
+            *o = if e > -700.0 && e < 700.0 {
+                (k * k * inv_w2 * fast_exp(e)).min(f64::MAX)
+            } else {
+                self.kernel(k, geom)
+            };
         }
     }
 

@@ -719,3 +719,40 @@ fn hurst_near_zero_builds_or_refuses_cleanly() {
         assert!(e.to_string().contains("'hurst'"), "{e}");
     }
 }
+
+/// The RGB path's shared-logarithm kernel equals the per-wavenumber kernel
+/// (to the fast exp's 2e-10), over random pairs and several Hurst exponents.
+#[test]
+fn kernel_at_wavenumbers_matches_kernel() {
+    let ks: Vec<f64> = (0..12)
+        .map(|j| 2.0 * PI / (0.38 + 0.035 * j as f64))
+        .collect();
+    let ln_ks: Vec<f64> = ks.iter().map(|k| k.ln()).collect();
+    let mut state = 11u64;
+    let mut next = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut worst: f64 = 0.0;
+    for hurst in [0.3, 0.7, 1.0] {
+        let s = FractalSurface::new(hurst, 0.1, 1.0).unwrap();
+        for _ in 0..500 {
+            let wi = DVec3::new(next() - 0.5, next() - 0.5, next() + 0.05).normalize();
+            let wo = DVec3::new(next() - 0.5, next() - 0.5, next() + 0.05).normalize();
+            let Some(geom) = PairGeometry::new(wi, wo) else {
+                continue;
+            };
+            let mut out = [0.0; 12];
+            s.kernel_at_wavenumbers(&ks, &ln_ks, &geom, &mut out);
+            for (o, &k) in out.iter().zip(&ks) {
+                let direct = s.kernel(k, &geom);
+                let rel = (o - direct).abs() / direct.max(1e-300);
+                worst = worst.max(if direct > 1e-290 { rel } else { 0.0 });
+            }
+        }
+    }
+    println!("kernel_at_wavenumbers: worst relative difference {worst:.2e}");
+    assert!(worst < 1e-8, "{worst}");
+}

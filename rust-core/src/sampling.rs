@@ -25,6 +25,7 @@ use crate::brdf::{in_band, wavenumber_per_um, Brdf, Surface, COHERENT_MAX_G};
 use crate::gaussian::{poisson_series, SeriesSettings};
 use crate::geometry::{normalize_direction, reflect, MIN_COS};
 use crate::periodic::PeriodicSurface;
+use crate::special::fast_exp;
 use glam::DVec3;
 use std::cell::RefCell;
 use std::f64::consts::PI;
@@ -61,6 +62,8 @@ const GW2_CAP: f64 = 50.0;
 /// (their Gaussian factor is below e^-40.5).
 const ORDER_REACH_SD: f64 = 9.0;
 const ONE_MINUS: f64 = 1.0 - f64::EPSILON;
+/// ln(4 pi^2), the fractal lobe's normalisation.
+const LN_4PI2: f64 = 3.675_754_132_818_690_8;
 
 /// One sampled direction.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -156,7 +159,7 @@ impl SeriesLobe {
         // S(g0, x) <= e^(-x / m_hi) + P(M > m_hi), the Poisson tail beyond
         // g0 + 10 sd + 15 being far below 1e-20.
         let m_hi = self.g0 + 10.0 * self.g0.sqrt() + 15.0;
-        if self.norm * ((-x / m_hi).exp() + 1e-20) < negligible {
+        if self.norm * (fast_exp(-x / m_hi) + 1e-20) < negligible {
             return 0.0;
         }
         self.norm * poisson_series(self.g0, x, &SeriesSettings::default())
@@ -249,7 +252,7 @@ impl HorizonLobe {
         let ty = y / self.s;
         let ta = (alpha - self.alpha_mean) / self.alpha_sd;
         let density =
-            (-0.5 * (ty * ty + ta * ta)).exp() / (2.0 * PI * self.s * self.alpha_sd * self.mass);
+            fast_exp(-0.5 * (ty * ty + ta * ta)) / (2.0 * PI * self.s * self.alpha_sd * self.mass);
         if density.is_finite() {
             density
         } else {
@@ -363,7 +366,7 @@ impl OrdersLobe {
         let mut sum = 0.0;
         for n in a as i64..=b as i64 {
             let d = u - n as f64 * self.du;
-            sum += self.prob[(n - self.n_lo) as usize] * (-(d * d) * inv2s2 - ev).exp();
+            sum += self.prob[(n - self.n_lo) as usize] * fast_exp(-(d * d) * inv2s2 - ev);
         }
         sum * inv2s2 / PI
     }
@@ -442,7 +445,7 @@ impl RainbowLobe {
                 break;
             }
             if p > 0.0 {
-                sum += p * (-e).exp() / (2.0 * PI * s * s);
+                sum += p * fast_exp(-e) / (2.0 * PI * s * s);
             }
         }
         // Orders n != 0 whose rainbow passes through u: lambda = Lam |u| / |n|.
@@ -464,7 +467,8 @@ impl RainbowLobe {
                     if y > 0.0 {
                         let s = self.sigma(lambda);
                         let density_u = self.period_nm / n as f64;
-                        let density_v = (-(v * v) / (2.0 * s * s)).exp() / ((2.0 * PI).sqrt() * s);
+                        let density_v =
+                            fast_exp(-(v * v) / (2.0 * s * s)) / ((2.0 * PI).sqrt() * s);
                         sum += y * density_u * density_v;
                     }
                 }
@@ -541,10 +545,10 @@ impl Lobe {
                 let Surface::Fractal(f) = &brdf.surface else {
                     return 0.0;
                 };
-                let ln_r = (u * u + v * v).sqrt().ln();
-                let ln_p = 2.0 * ln_c + f.profile.ln_phi_at_ln(ln_r + ln_c) - (4.0 * PI * PI).ln();
+                let ln_r = 0.5 * (u * u + v * v).ln();
+                let ln_p = 2.0 * ln_c + f.profile.ln_phi_at_ln(ln_r + ln_c) - LN_4PI2;
                 if ln_p < 709.0 {
-                    ln_p.exp()
+                    fast_exp(ln_p)
                 } else {
                     f64::MAX
                 }
@@ -562,7 +566,7 @@ impl Lobe {
                 }
                 let (sx, sy) = (h.x / h.z, h.y / h.z);
                 let e = sx * sx / (ax * ax) + sy * sy / (ay * ay);
-                let p22 = (-e).exp() / (PI * ax * ay);
+                let p22 = fast_exp(-e) / (PI * ax * ay);
                 let d = p22 / h.z.powi(4);
                 return d * h.z / (4.0 * cos_ih);
             }
@@ -689,9 +693,36 @@ impl DirectionSampler<'_> {
     }
 
     pub fn sample(&self, rnd: [f64; 3]) -> SampleResult {
+        match self.sample_direction(rnd) {
+            Some((wo, true)) => SampleResult {
+                wo,
+                pdf: self.coherent_probability(),
+                coherent: true,
+            },
+            Some((wo, false)) => {
+                let pdf = self.pdf(wo);
+                if pdf > 0.0 && pdf.is_finite() {
+                    SampleResult {
+                        wo,
+                        pdf,
+                        coherent: false,
+                    }
+                } else {
+                    SampleResult::failed()
+                }
+            }
+            None => SampleResult::failed(),
+        }
+    }
+
+    /// The direction `sample` draws and whether it is the coherent lobe's,
+    /// without its pdf (callers that evaluate the pdf at a rounded or
+    /// otherwise mapped direction skip one evaluation); None when the
+    /// sample failed.
+    pub fn sample_direction(&self, rnd: [f64; 3]) -> Option<(DVec3, bool)> {
         let count = self.components.len();
         if count == 0 {
-            return SampleResult::failed();
+            return None;
         }
         let [r0, r1, r2] = rnd.map(unit_interval);
         let scaled = r0 * count as f64;
@@ -699,11 +730,7 @@ impl DirectionSampler<'_> {
         let mut r = (scaled - j as f64).clamp(0.0, ONE_MINUS);
         let c = &self.components[j];
         if r < c.p_coh {
-            return SampleResult {
-                wo: reflect(self.wi),
-                pdf: self.coherent_probability(),
-                coherent: true,
-            };
+            return Some((reflect(self.wi), true));
         }
         r -= c.p_coh;
         let wo = if r < c.p_def {
@@ -722,19 +749,7 @@ impl DirectionSampler<'_> {
                 None => None,
             }
         };
-        let Some(wo) = wo else {
-            return SampleResult::failed();
-        };
-        let pdf = self.pdf(wo);
-        if pdf > 0.0 && pdf.is_finite() {
-            SampleResult {
-                wo,
-                pdf,
-                coherent: false,
-            }
-        } else {
-            SampleResult::failed()
-        }
+        wo.map(|wo| (wo, false))
     }
 }
 

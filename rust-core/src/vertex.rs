@@ -119,11 +119,11 @@ impl Brdf {
                 (Some(lambdas[j]), [rest, rnd[1], rnd[2]])
             }
         };
-        let s = self.sampler(wi, lambda).sample(rnd);
-        if !(s.pdf > 0.0) {
+        let sampler = self.sampler(wi, lambda);
+        let Some((wo, coherent)) = sampler.sample_direction(rnd) else {
             return failed;
-        }
-        if s.coherent {
+        };
+        if coherent {
             let pdf = self.coherent_probability_channels(wi, channels);
             if !(pdf > 0.0) {
                 return failed;
@@ -136,12 +136,16 @@ impl Brdf {
                     }
                 }
             }
-            return SampleResult { pdf, ..s };
+            return SampleResult {
+                wo,
+                pdf,
+                coherent: true,
+            };
         }
-        let wo = round(s.wo);
-        let pdf = match (channels, lambda) {
-            // The single strategy's own density: sample() computed it.
-            (Channels::Rgb, _) | (Channels::Wavelengths([_]), _) if wo == s.wo => s.pdf,
+        let wo = round(wo);
+        let pdf = match channels {
+            // A single strategy: the one at hand.
+            Channels::Rgb | Channels::Wavelengths([_]) => sampler.pdf(wo),
             _ => self.pdf_channels(wi, wo, channels),
         };
         if !(pdf > 0.0 && pdf.is_finite()) {
