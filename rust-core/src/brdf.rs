@@ -319,8 +319,8 @@ impl Brdf {
         };
         let rgb = match &self.surface {
             Surface::Periodic(s) => {
-                let fresnel = &self.fresnel;
-                let reflectance = |lambda_nm: f64| fresnel.reflectance(geom.cos_half, lambda_nm);
+                let fresnel = self.fresnel.at_cos(geom.cos_half);
+                let reflectance = |lambda_nm: f64| fresnel.reflectance(lambda_nm);
                 s.kernel_rgb(&geom, &reflectance)
             }
             _ => {

@@ -158,6 +158,13 @@ impl MetalGrid {
 
     #[inline]
     pub fn reflectance(&self, cos_theta: f64, lambda_nm: f64) -> f64 {
+        let columns = GridColumns::new(cos_theta);
+        self.reflectance_at(&columns, lambda_nm)
+    }
+
+    /// The reflectance at a wavelength, the cosine's columns given.
+    #[inline]
+    fn reflectance_at(&self, columns: &GridColumns, lambda_nm: f64) -> f64 {
         let xs = &self.lambda_nm;
         let last = xs.len() - 1;
         // Clamped at the table ends (NaN to the first row: callers zero it).
@@ -172,28 +179,96 @@ impl MetalGrid {
             r += 1;
         }
         let fy = ((lambda - xs[r]) / (xs[r + 1] - xs[r])).clamp(0.0, 1.0);
-        // Columns uniform in sqrt(cos): F is steepest towards grazing.
+        let row = GRID_COS_STEPS + 1;
+        let at = |r: usize| -> f64 {
+            let v = &self.values[r * row..(r + 1) * row];
+            let c = &columns.cols;
+            let w = &columns.weights;
+            w[0] * v[c[0]] as f64
+                + w[1] * v[c[1]] as f64
+                + w[2] * v[c[2]] as f64
+                + w[3] * v[c[3]] as f64
+        };
+        let (lo, hi) = (at(r), at(r + 1));
+        lo + fy * (hi - lo)
+    }
+}
+
+/// The grid columns and Catmull-Rom weights of one incidence cosine
+/// (columns uniform in sqrt(cos): F is steepest towards grazing; the end
+/// columns repeated beyond the ends).
+#[derive(Clone, Copy, Debug)]
+pub struct GridColumns {
+    cols: [usize; 4],
+    weights: [f64; 4],
+}
+
+impl GridColumns {
+    #[inline]
+    fn new(cos_theta: f64) -> GridColumns {
         let x = cos_theta.clamp(0.0, 1.0).sqrt() * GRID_COS_STEPS as f64;
         let x = if x.is_nan() { 0.0 } else { x };
         let i = (x as usize).min(GRID_COS_STEPS - 1);
         let t = x - i as f64;
-        // Catmull-Rom weights (the end columns repeated beyond the ends).
         let t2 = t * t;
         let t3 = t2 * t;
-        let wts = [
-            0.5 * (-t3 + 2.0 * t2 - t),
-            0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-            0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-            0.5 * (t3 - t2),
-        ];
-        let cols = [i.saturating_sub(1), i, i + 1, (i + 2).min(GRID_COS_STEPS)];
-        let row = GRID_COS_STEPS + 1;
-        let at = |r: usize| -> f64 {
-            let v = &self.values[r * row..(r + 1) * row];
-            wts.iter().zip(cols).map(|(w, c)| w * v[c] as f64).sum()
-        };
-        let (lo, hi) = (at(r), at(r + 1));
-        lo + fy * (hi - lo)
+        GridColumns {
+            cols: [i.saturating_sub(1), i, i + 1, (i + 2).min(GRID_COS_STEPS)],
+            weights: [
+                0.5 * (-t3 + 2.0 * t2 - t),
+                0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+                0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+                0.5 * (t3 - t2),
+            ],
+        }
+    }
+}
+
+/// The reflectance at one incidence cosine for any number of wavelengths
+/// (an RGB evaluation of a grating takes a dozen or more): what depends on
+/// the cosine alone is done once.
+pub enum FresnelAtCos<'a> {
+    Constant(f64),
+    Direct {
+        fresnel: &'a Fresnel,
+        cos_theta: f64,
+    },
+    Grid {
+        grid: &'a MetalGrid,
+        columns: GridColumns,
+    },
+}
+
+impl FresnelAtCos<'_> {
+    #[inline]
+    pub fn reflectance(&self, lambda_nm: f64) -> f64 {
+        match self {
+            FresnelAtCos::Constant(r) => *r,
+            FresnelAtCos::Direct { fresnel, cos_theta } => {
+                fresnel.reflectance(*cos_theta, lambda_nm)
+            }
+            FresnelAtCos::Grid { grid, columns } => grid.reflectance_at(columns, lambda_nm),
+        }
+    }
+}
+
+impl Fresnel {
+    /// `reflectance` at a fixed cosine, for many wavelengths.
+    #[inline]
+    pub fn at_cos(&self, cos_theta: f64) -> FresnelAtCos<'_> {
+        match self {
+            Fresnel::Constant(r) => FresnelAtCos::Constant(*r),
+            Fresnel::Metal {
+                grid: Some(grid), ..
+            } => FresnelAtCos::Grid {
+                grid,
+                columns: GridColumns::new(cos_theta),
+            },
+            _ => FresnelAtCos::Direct {
+                fresnel: self,
+                cos_theta,
+            },
+        }
     }
 }
 
