@@ -188,9 +188,10 @@ void to_soa(const float *aos, size_t n, size_t k, Channels ch, float *soa) {
 }
 
 /// Run every requested query of a batch through the core's path-vertex
-/// calls: spectral lanes pass their nw wavelengths (the core samples with
-/// one of them and returns the mixture density over all, see stam.h); RGB
-/// and Mono lanes pass none (Mono is the luminance of RGB).
+/// calls (one call when a lane asks for both, so that the core builds its
+/// strategy once): spectral lanes pass their nw wavelengths (the core samples
+/// with one of them and returns the mixture density over all, see stam.h);
+/// RGB and Mono lanes pass none (Mono is the luminance of RGB).
 void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b, Scratch &tmp) {
     const size_t n = b.n;
     const bool spectral = ch == Channels::Spectral;
@@ -198,26 +199,36 @@ void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b, Scratch &
     const size_t core_nw = spectral ? nw : 0,
                  core_nc = spectral ? nw : 3,        // floats per lane from the core
                  nc = ch == Channels::Mono ? 1 : core_nc;
+    const bool eval = b.want_f || b.want_pdf;
 
-    if (b.want_f || b.want_pdf) {
+    float *f = nullptr, *pdf = nullptr;
+    if (eval) {
         tmp.aos.resize(core_nc * n);
         b.pdf.assign(n, 0.f);
-        stam_brdf_eval_pdf_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw,
-                                  b.want_f ? tmp.aos.data() : nullptr,
-                                  b.want_pdf ? b.pdf.data() : nullptr);
-        if (b.want_f) {
-            b.f.resize(nc * n);
-            to_soa(tmp.aos.data(), n, core_nc, ch, b.f.data());
-        }
+        f = b.want_f ? tmp.aos.data() : nullptr;
+        pdf = b.want_pdf ? b.pdf.data() : nullptr;
     }
-
     if (b.want_sample) {
         tmp.wo.resize(3 * n);
         tmp.pdf.resize(n);
         tmp.coh.resize(n);
         tmp.val.resize(core_nc * n);
+    }
+    if (eval && b.want_sample)
+        stam_brdf_eval_pdf_sample_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw,
+                                         b.rnd.data(), f, pdf, tmp.wo.data(), tmp.pdf.data(),
+                                         tmp.coh.data(), tmp.val.data());
+    else if (eval)
+        stam_brdf_eval_pdf_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw, f, pdf);
+    else if (b.want_sample)
         stam_brdf_sample_vertex(core, n, b.wi.data(), lam, core_nw, b.rnd.data(),
                                 tmp.wo.data(), tmp.pdf.data(), tmp.coh.data(), tmp.val.data());
+
+    if (b.want_f) {
+        b.f.resize(nc * n);
+        to_soa(tmp.aos.data(), n, core_nc, ch, b.f.data());
+    }
+    if (b.want_sample) {
         b.s_wo.resize(3 * n);
         to_soa(tmp.wo.data(), n, 3, Channels::Rgb, b.s_wo.data());
         b.s_pdf.assign(tmp.pdf.begin(), tmp.pdf.end());

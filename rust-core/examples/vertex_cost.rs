@@ -3,9 +3,9 @@
 //!
 //! A path tracer's vertex (Mitsuba's `eval_pdf_sample`) is: f and pdf towards
 //! the sampled light, then one BSDF sample with f (and the pdf) at the
-//! sampled direction. The plugin makes exactly these two calls
-//! (stam_brdf_eval_pdf_vertex, stam_brdf_sample_vertex; see
-//! mitsuba-plugin/diffraction.cpp); this replays them for the render
+//! sampled direction. The plugin makes them in one call
+//! (stam_brdf_eval_pdf_sample_vertex; see mitsuba-plugin/diffraction.cpp);
+//! this replays it for the render
 //! benchmark's materials (scripts/bench_render.py) with random incident
 //! directions (a render's are more coherent, so caches fare better there),
 //! so that changes to the core can be measured in seconds instead of
@@ -166,9 +166,9 @@ unsafe fn vertex_spectral(b: *const StamBrdf, v: &Vertex) -> f32 {
     f[0] + p[0] + spdf + g[0] + q[0]
 }
 
-/// One vertex through the vertex ABI (what the plugin calls): f and pdf
-/// towards the light, then a sample with its value, for RGB (nw = 0) or
-/// the path's wavelengths.
+/// One vertex through the vertex ABI, as the plugin calls it: f and pdf
+/// towards the light and a sample with its value, in one call, for RGB (nw =
+/// 0) or the path's wavelengths.
 unsafe fn vertex_fused(b: *const StamBrdf, v: &Vertex, nw: usize) -> f32 {
     let lam = if nw == 0 {
         std::ptr::null()
@@ -176,24 +176,17 @@ unsafe fn vertex_fused(b: *const StamBrdf, v: &Vertex, nw: usize) -> f32 {
         v.lambda_nm.as_ptr()
     };
     let (mut f, mut pdf) = ([0f32; 4], 0f32);
-    stam_brdf_eval_pdf_vertex(
+    let (mut wo, mut spdf, mut coh, mut value) = ([0f32; 3], 0f32, 0u8, [0f32; 4]);
+    stam_brdf_eval_pdf_sample_vertex(
         b,
         1,
         v.wi.as_ptr(),
         v.wo_light.as_ptr(),
         lam,
         nw,
+        v.rnd.as_ptr(),
         f.as_mut_ptr(),
         &mut pdf,
-    );
-    let (mut wo, mut spdf, mut coh, mut value) = ([0f32; 3], 0f32, 0u8, [0f32; 4]);
-    stam_brdf_sample_vertex(
-        b,
-        1,
-        v.wi.as_ptr(),
-        lam,
-        nw,
-        v.rnd.as_ptr(),
         wo.as_mut_ptr(),
         &mut spdf,
         &mut coh,

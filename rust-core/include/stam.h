@@ -108,6 +108,15 @@ void stam_brdf_sample_vertex(const StamBrdf *b, size_t n, const float *wi,
                              const float *lambda_nm, size_t nw, const float *rnd, float *wo,
                              float *pdf, uint8_t *coherent, float *value);
 
+/* Both at once (a path tracer's vertex: f and pdf towards the sampled
+ * light, then a BSDF sample), sharing the lane's strategy: (wo, f, pdf) as
+ * in stam_brdf_eval_pdf_vertex, (rnd, s_wo, s_pdf, s_coherent, s_value) as
+ * (rnd, wo, pdf, coherent, value) in stam_brdf_sample_vertex. */
+void stam_brdf_eval_pdf_sample_vertex(const StamBrdf *b, size_t n, const float *wi,
+                                      const float *wo, const float *lambda_nm, size_t nw,
+                                      const float *rnd, float *f, float *pdf, float *s_wo,
+                                      float *s_pdf, uint8_t *s_coherent, float *s_value);
+
 /* Flags describing the material, for renderers. */
 #define STAM_FLAG_HAS_COHERENT 1u   /* a coherent delta lobe can be non-zero */
 #define STAM_FLAG_ANISOTROPIC 2u    /* f depends on the azimuth of the frame */

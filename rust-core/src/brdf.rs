@@ -44,9 +44,6 @@ pub struct Brdf {
     pub fresnel: Fresnel,
     /// Wavelength rule of the RGB path for spectrally smooth surfaces.
     rgb_rule: RgbRule,
-    /// Unique per material built in this process: keys the per-thread cache
-    /// of sampling strategies (an address could be reused after a free).
-    pub(crate) id: u64,
     /// Diffuse albedo table of the sampling strategy (isotropic Gaussian
     /// surfaces), built on the first sample.
     pub(crate) sampling_albedo: std::sync::OnceLock<crate::sampling::AlbedoTable>,
@@ -213,13 +210,11 @@ impl Brdf {
         } else {
             RgbRule::new(node_count, &params.fresnel)
         };
-        static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
         Ok(Brdf {
             fresnel: params.fresnel.clone(),
             params,
             surface,
             rgb_rule,
-            id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
             sampling_albedo: std::sync::OnceLock::new(),
             grating_table: std::sync::OnceLock::new(),
             component_table: std::sync::OnceLock::new(),

@@ -354,46 +354,16 @@ pub unsafe extern "C" fn stam_brdf_eval_pdf_vertex(
     f: *mut f32,
     pdf: *mut f32,
 ) {
-    if n == 0 {
-        return;
-    }
-    let nc = channel_count(lambda_nm, nw);
-    let zero = || {
-        if !f.is_null() {
-            std::slice::from_raw_parts_mut(f, n * nc.unwrap_or(0)).fill(0.0);
-        }
-        if !pdf.is_null() {
-            std::slice::from_raw_parts_mut(pdf, n).fill(0.0);
-        }
-    };
-    let Some(nc) = nc else {
-        return zero();
-    };
-    if b.is_null() || wi.is_null() || wo.is_null() {
-        return zero();
-    }
-    let brdf = &(*b).brdf;
-    let result = catch_unwind(AssertUnwindSafe(|| {
-        let mut buf = [0.0; MAX_PATH_WAVELENGTHS];
-        let mut values = [0.0; MAX_PATH_WAVELENGTHS];
-        for i in 0..n {
-            let channels = lane_channels(lambda_nm, nw, i, &mut buf);
-            let (wi, wo) = (direction(wi, i), direction(wo, i));
-            if !f.is_null() {
-                brdf.eval_channels(wi, wo, channels, &mut values);
-                let out = std::slice::from_raw_parts_mut(f.add(i * nc), nc);
-                for (o, &v) in out.iter_mut().zip(&values) {
-                    *o = to_output(v);
-                }
-            }
-            if !pdf.is_null() {
-                *pdf.add(i) = to_output(brdf.pdf_channels(wi, wo, channels));
-            }
-        }
-    }));
-    if result.is_err() {
-        zero();
-    }
+    let null = std::ptr::null_mut();
+    vertex_queries(
+        b,
+        n,
+        wi,
+        lambda_nm,
+        nw,
+        (wo, f, pdf),
+        (std::ptr::null(), null, null, std::ptr::null_mut(), null),
+    );
 }
 
 /// # Safety
@@ -413,58 +383,148 @@ pub unsafe extern "C" fn stam_brdf_sample_vertex(
     coherent: *mut u8,
     value: *mut f32,
 ) {
+    // Without somewhere to put the sample: zeros.
+    let b = if rnd.is_null() || wo.is_null() || pdf.is_null() {
+        std::ptr::null()
+    } else {
+        b
+    };
+    let null = std::ptr::null_mut();
+    vertex_queries(
+        b,
+        n,
+        wi,
+        lambda_nm,
+        nw,
+        (std::ptr::null(), null, null),
+        (rnd, wo, pdf, coherent, value),
+    );
+}
+
+/// # Safety
+/// As stam_brdf_eval_pdf_vertex for (wo, f, pdf) and stam_brdf_sample_vertex
+/// for (rnd, s_wo, s_pdf, s_coherent, s_value).
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_eval_pdf_sample_vertex(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    wo: *const f32,
+    lambda_nm: *const f32,
+    nw: usize,
+    rnd: *const f32,
+    f: *mut f32,
+    pdf: *mut f32,
+    s_wo: *mut f32,
+    s_pdf: *mut f32,
+    s_coherent: *mut u8,
+    s_value: *mut f32,
+) {
+    let b = if rnd.is_null() || s_wo.is_null() || s_pdf.is_null() {
+        std::ptr::null() // outputs zeroed
+    } else {
+        b
+    };
+    vertex_queries(
+        b,
+        n,
+        wi,
+        lambda_nm,
+        nw,
+        (wo, f, pdf),
+        (rnd, s_wo, s_pdf, s_coherent, s_value),
+    );
+}
+
+/// The vertex queries of n lanes, sharing each lane's strategy: an eval
+/// part (wo, f, pdf: wo NULL for none, f or pdf NULL to skip) and a sample
+/// part (rnd, wo, pdf, coherent, value: rnd NULL for none). Outputs are
+/// zeroed for a NULL material or wi, nw out of range, or a caught panic.
+#[allow(clippy::type_complexity)]
+unsafe fn vertex_queries(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    lambda_nm: *const f32,
+    nw: usize,
+    (wo, f, pdf): (*const f32, *mut f32, *mut f32),
+    (rnd, s_wo, s_pdf, s_coh, s_value): (*const f32, *mut f32, *mut f32, *mut u8, *mut f32),
+) {
     if n == 0 {
         return;
     }
     let nc = channel_count(lambda_nm, nw);
+    let eval = !wo.is_null() && (!f.is_null() || !pdf.is_null());
+    let sample = !rnd.is_null();
     let zero = || {
-        if !wo.is_null() {
-            std::slice::from_raw_parts_mut(wo, 3 * n).fill(0.0);
-        }
-        if !pdf.is_null() {
-            std::slice::from_raw_parts_mut(pdf, n).fill(0.0);
-        }
-        if !coherent.is_null() {
-            std::slice::from_raw_parts_mut(coherent, n).fill(0);
-        }
-        if !value.is_null() {
-            std::slice::from_raw_parts_mut(value, n * nc.unwrap_or(0)).fill(0.0);
+        let fill = |p: *mut f32, len: usize| {
+            if !p.is_null() {
+                std::slice::from_raw_parts_mut(p, len).fill(0.0);
+            }
+        };
+        let k = nc.unwrap_or(0);
+        fill(f, n * k);
+        fill(pdf, n);
+        fill(s_wo, 3 * n);
+        fill(s_pdf, n);
+        fill(s_value, n * k);
+        if !s_coh.is_null() {
+            std::slice::from_raw_parts_mut(s_coh, n).fill(0);
         }
     };
     let Some(nc) = nc else {
         return zero();
     };
-    if b.is_null() || wi.is_null() || rnd.is_null() || wo.is_null() || pdf.is_null() {
+    if b.is_null() || wi.is_null() || (!eval && !sample) {
         return zero();
     }
     let brdf = &(*b).brdf;
-    // The caller sees f32 directions: pdf and value are taken there.
+    // The caller sees f32 directions: a sample's pdf and value are taken there.
     let round = |w: DVec3| DVec3::new(w.x as f32 as f64, w.y as f32 as f64, w.z as f32 as f64);
     let result = catch_unwind(AssertUnwindSafe(|| {
         let mut buf = [0.0; MAX_PATH_WAVELENGTHS];
         let mut values = [0.0; MAX_PATH_WAVELENGTHS];
         for i in 0..n {
             let channels = lane_channels(lambda_nm, nw, i, &mut buf);
-            let r = std::slice::from_raw_parts(rnd.add(3 * i), 3);
-            let s = brdf.sample_channels(
-                direction(wi, i),
-                channels,
-                [r[0] as f64, r[1] as f64, r[2] as f64],
-                round,
-                &mut values,
-            );
-            let ok = s.pdf > 0.0;
-            let d = if ok { round(s.wo) } else { DVec3::ZERO };
-            std::slice::from_raw_parts_mut(wo.add(3 * i), 3)
-                .copy_from_slice(&[d.x as f32, d.y as f32, d.z as f32]);
-            *pdf.add(i) = to_output(s.pdf);
-            if !coherent.is_null() {
-                *coherent.add(i) = u8::from(ok && s.coherent);
+            let wi_i = direction(wi, i);
+            let needs_strategy = sample || !pdf.is_null();
+            let strategy = needs_strategy.then(|| brdf.vertex_strategy(wi_i, channels));
+            if eval {
+                let wo_i = direction(wo, i);
+                if !f.is_null() {
+                    brdf.eval_channels(wi_i, wo_i, channels, &mut values);
+                    let out = std::slice::from_raw_parts_mut(f.add(i * nc), nc);
+                    for (o, &v) in out.iter_mut().zip(&values) {
+                        *o = to_output(v);
+                    }
+                }
+                if let (false, Some(strategy)) = (pdf.is_null(), &strategy) {
+                    *pdf.add(i) = to_output(strategy.pdf(wo_i));
+                }
             }
-            if !value.is_null() {
-                let out = std::slice::from_raw_parts_mut(value.add(i * nc), nc);
-                for (o, &v) in out.iter_mut().zip(&values) {
-                    *o = if ok { to_output(v) } else { 0.0 };
+            if let (true, Some(strategy)) = (sample, &strategy) {
+                let r = std::slice::from_raw_parts(rnd.add(3 * i), 3);
+                let s = brdf.sample_with(
+                    strategy,
+                    wi_i,
+                    channels,
+                    [r[0] as f64, r[1] as f64, r[2] as f64],
+                    round,
+                    &mut values,
+                );
+                let ok = s.pdf > 0.0;
+                let d = if ok { round(s.wo) } else { DVec3::ZERO };
+                std::slice::from_raw_parts_mut(s_wo.add(3 * i), 3)
+                    .copy_from_slice(&[d.x as f32, d.y as f32, d.z as f32]);
+                *s_pdf.add(i) = to_output(s.pdf);
+                if !s_coh.is_null() {
+                    *s_coh.add(i) = u8::from(ok && s.coherent);
+                }
+                if !s_value.is_null() {
+                    let out = std::slice::from_raw_parts_mut(s_value.add(i * nc), nc);
+                    for (o, &v) in out.iter_mut().zip(&values) {
+                        *o = if ok { to_output(v) } else { 0.0 };
+                    }
                 }
             }
         }

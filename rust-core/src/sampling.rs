@@ -27,7 +27,7 @@ use crate::geometry::{normalize_direction, reflect, MIN_COS};
 use crate::periodic::PeriodicSurface;
 use crate::special::fast_exp;
 use glam::DVec3;
-use std::cell::RefCell;
+use smallvec::{smallvec, SmallVec};
 use std::f64::consts::PI;
 use std::sync::{Arc, OnceLock};
 
@@ -619,34 +619,29 @@ pub struct DirectionSampler<'a> {
     brdf: &'a Brdf,
     wi: DVec3,
     /// Equally weighted components (several in RGB mode).
-    components: Arc<Vec<Component>>,
+    components: Components,
 }
 
-/// Strategies recently built on this thread. A renderer asks for the pdf and
-/// for a sample at the same incident direction (emitter sampling, then BSDF
-/// sampling, at every vertex; a spectral path for each of its wavelengths),
-/// and building the strategy can cost more than using it (the grating
-/// rainbow in RGB mode), so the last few are kept, keyed by material id,
-/// the exact bits of wi and the wavelength.
-struct SamplerCache {
-    slots: [Option<CachedStrategy>; SAMPLER_CACHE_SLOTS],
-    next: usize,
+/// A strategy's components: made for the call, inline (the smooth models'
+/// come from their component table: a copy costs less than any cache or
+/// allocation), or shared with a table or cache (gratings).
+// Inline on purpose: a strategy is built per vertex, and a heap allocation
+// per build cost more than moving a few hundred bytes.
+#[allow(clippy::large_enum_variant)]
+enum Components {
+    Local(SmallVec<[Component; RGB_SAMPLING_NODES]>),
+    Shared(Arc<Vec<Component>>),
 }
 
-struct CachedStrategy {
-    brdf_id: u64,
-    wi_bits: [u64; 3],
-    lambda_bits: u64,
-    components: Arc<Vec<Component>>,
-}
-
-/// Enough for the 4 wavelengths of a spectral path, twice.
-const SAMPLER_CACHE_SLOTS: usize = 8;
-
-thread_local! {
-    static SAMPLER_CACHE: RefCell<SamplerCache> = const {
-        RefCell::new(SamplerCache { slots: [const { None }; SAMPLER_CACHE_SLOTS], next: 0 })
-    };
+impl std::ops::Deref for Components {
+    type Target = [Component];
+    #[inline]
+    fn deref(&self) -> &[Component] {
+        match self {
+            Components::Local(v) => v,
+            Components::Shared(v) => v,
+        }
+    }
 }
 
 impl DirectionSampler<'_> {
@@ -761,49 +756,16 @@ impl Brdf {
             return DirectionSampler {
                 brdf: self,
                 wi: DVec3::Z,
-                components: Arc::new(Vec::new()),
+                components: Components::Local(SmallVec::new()),
             };
         };
-        // Gratings in RGB mode: the table's cell holds the strategy.
-        if let (None, Surface::Periodic(p)) = (lambda_nm, &self.surface) {
-            let components = match self.grating_table(p) {
+        let components = match (lambda_nm, &self.surface) {
+            // Gratings in RGB mode: the table's cell holds the strategy.
+            (None, Surface::Periodic(p)) => Components::Shared(match self.grating_table(p) {
                 Some(table) => table.cell(self, p, wi).rgb.clone(),
                 None => Arc::new(vec![Component::cosine_only()]),
-            };
-            return DirectionSampler {
-                brdf: self,
-                wi,
-                components,
-            };
-        }
-        let wi_bits = wi.to_array().map(f64::to_bits);
-        // RGB mode is keyed by a NaN pattern no wavelength argument can carry
-        // here (NaN wavelengths get the cosine strategy, like any other
-        // out-of-band one, and are keyed by their own bits).
-        let lambda_bits = lambda_nm.map_or(u64::MAX, f64::to_bits);
-        let cached = SAMPLER_CACHE.with(|cache| {
-            cache.borrow().slots.iter().flatten().find_map(|c| {
-                (c.brdf_id == self.id && c.wi_bits == wi_bits && c.lambda_bits == lambda_bits)
-                    .then(|| c.components.clone())
-            })
-        });
-        let components = match cached {
-            Some(components) => components,
-            None => {
-                let components = Arc::new(self.build_components(wi, lambda_nm));
-                SAMPLER_CACHE.with(|cache| {
-                    let mut cache = cache.borrow_mut();
-                    let slot = cache.next;
-                    cache.slots[slot] = Some(CachedStrategy {
-                        brdf_id: self.id,
-                        wi_bits,
-                        lambda_bits,
-                        components: components.clone(),
-                    });
-                    cache.next = (slot + 1) % SAMPLER_CACHE_SLOTS;
-                });
-                components
-            }
+            }),
+            _ => Components::Local(self.build_components(wi, lambda_nm)),
         };
         DirectionSampler {
             brdf: self,
@@ -812,12 +774,16 @@ impl Brdf {
         }
     }
 
-    fn build_components(&self, wi: DVec3, lambda_nm: Option<f64>) -> Vec<Component> {
+    fn build_components(
+        &self,
+        wi: DVec3,
+        lambda_nm: Option<f64>,
+    ) -> SmallVec<[Component; RGB_SAMPLING_NODES]> {
         match lambda_nm {
-            Some(lambda) => vec![self.spectral_component(wi, lambda)],
+            Some(lambda) => smallvec![self.spectral_component(wi, lambda)],
             None => match &self.surface {
                 Surface::Periodic(p) => {
-                    vec![self
+                    smallvec![self
                         .grating_table(p)
                         .map_or_else(Component::cosine_only, |table| {
                             let cell = table.cell(self, p, wi);
@@ -1074,7 +1040,7 @@ impl AlbedoTable {
                 let sampler = DirectionSampler {
                     brdf,
                     wi,
-                    components: Arc::new(vec![Component {
+                    components: Components::Local(smallvec![Component {
                         p_coh: 0.0,
                         p_def: c.p_def / rest,
                         p_lobe: c.p_lobe / rest,
@@ -2105,7 +2071,7 @@ mod tests {
     /// material dropped and rebuilt with other parameters is not confused
     /// with the old one.
     #[test]
-    fn strategy_cache_is_keyed_by_material_and_wavelength() {
+    fn strategy_is_a_function_of_material_wi_and_wavelength() {
         let wi = incidences()[1].1;
         let wo = DVec3::new(-0.5, -0.3, 0.81).normalize();
         let a = material(MEDIUM);
@@ -2169,12 +2135,21 @@ mod tests {
         assert!(worst < 0.1, "worst relative error {worst}");
     }
 
+    impl DirectionSampler<'_> {
+        fn components_mut(&mut self) -> &mut [Component] {
+            match &mut self.components {
+                Components::Local(v) => v,
+                Components::Shared(_) => panic!("a shared strategy cannot be altered"),
+            }
+        }
+    }
+
     /// A strategy built outside the per-thread cache, to be altered.
     fn uncached(brdf: &Brdf, wi: DVec3, lambda_nm: Option<f64>) -> DirectionSampler<'_> {
         DirectionSampler {
             brdf,
             wi,
-            components: Arc::new(brdf.build_components(wi, lambda_nm)),
+            components: Components::Local(brdf.build_components(wi, lambda_nm)),
         }
     }
 
@@ -2188,7 +2163,7 @@ mod tests {
         let wi = incidences()[0].1;
         let good = brdf.sampler(wi, Some(550.0));
         let mut wide = uncached(&brdf, wi, Some(550.0));
-        match &mut Arc::get_mut(&mut wide.components).unwrap()[0].lobe {
+        match &mut wide.components_mut()[0].lobe {
             Some(Lobe::Series(s)) => {
                 s.k /= 1.04;
                 s.norm /= 1.04 * 1.04;
@@ -2203,7 +2178,7 @@ mod tests {
         let wi = incidences()[1].1;
         let good = smooth.sampler(wi, Some(550.0));
         let mut off = uncached(&smooth, wi, Some(550.0));
-        let components = Arc::get_mut(&mut off.components).unwrap();
+        let components = off.components_mut();
         components[0].p_coh *= 0.98;
         components[0].p_def += 0.02 * good.components[0].p_coh;
         let fit = chi2_fit_against(&good, &off, 6, CHI2_SAMPLES);
@@ -2215,7 +2190,7 @@ mod tests {
         let wi = incidences()[2].1;
         let good = brdf.sampler(wi, Some(450.0));
         let mut wide = uncached(&brdf, wi, Some(450.0));
-        match &mut Arc::get_mut(&mut wide.components).unwrap()[0].lobe {
+        match &mut wide.components_mut()[0].lobe {
             Some(Lobe::Horizon(horizon)) => horizon.s *= 1.25,
             _ => panic!("expected the near-horizon lobe at grazing incidence"),
         }

@@ -12,8 +12,9 @@
 
 use crate::brdf::Brdf;
 use crate::geometry::PairGeometry;
-use crate::sampling::SampleResult;
+use crate::sampling::{DirectionSampler, SampleResult};
 use glam::DVec3;
+use smallvec::{smallvec, SmallVec};
 
 /// The channels of a path: RGB (3 values), or its wavelengths in nm.
 #[derive(Clone, Copy, Debug)]
@@ -32,7 +33,61 @@ impl Channels<'_> {
     }
 }
 
+/// The sampling strategy of one vertex: RGB mode's, or one per wavelength
+/// of the path (the mixture). Built once and used for the pdf towards the
+/// light, the sample and the pdf at the sample.
+pub struct VertexStrategy<'a> {
+    samplers: SmallVec<[DirectionSampler<'a>; 4]>,
+}
+
+impl VertexStrategy<'_> {
+    /// Solid-angle density at wo of the non-coherent part: the mean over
+    /// the wavelengths' strategies (0 for a path without channels).
+    pub fn pdf(&self, wo: DVec3) -> f64 {
+        if self.samplers.is_empty() {
+            return 0.0;
+        }
+        let sum: f64 = self.samplers.iter().map(|s| s.pdf(wo)).sum();
+        sum / self.samplers.len() as f64
+    }
+
+    /// Probability of the coherent lobe.
+    pub fn coherent_probability(&self) -> f64 {
+        if self.samplers.is_empty() {
+            return 0.0;
+        }
+        let sum: f64 = self.samplers.iter().map(|s| s.coherent_probability()).sum();
+        sum / self.samplers.len() as f64
+    }
+
+    /// A direction and whether it is the coherent lobe's: rnd[0] picks the
+    /// wavelength whose strategy draws it and is rescaled for that
+    /// strategy's own choices. None when the sample failed.
+    pub fn sample_direction(&self, rnd: [f64; 3]) -> Option<(DVec3, bool)> {
+        let n = self.samplers.len();
+        if n == 0 {
+            return None;
+        }
+        let r0 = if rnd[0] >= 0.0 { rnd[0].min(1.0) } else { 0.0 };
+        let scaled = r0 * n as f64;
+        let j = (scaled as usize).min(n - 1);
+        let rest = (scaled - j as f64).clamp(0.0, 1.0 - f64::EPSILON);
+        self.samplers[j].sample_direction([rest, rnd[1], rnd[2]])
+    }
+}
+
 impl Brdf {
+    /// The strategy of a vertex at wi for a path with these channels.
+    pub fn vertex_strategy(&self, wi: DVec3, channels: Channels) -> VertexStrategy<'_> {
+        let samplers = match channels {
+            Channels::Rgb => smallvec![self.sampler(wi, None)],
+            Channels::Wavelengths(lambdas) => {
+                lambdas.iter().map(|&l| self.sampler(wi, Some(l))).collect()
+            }
+        };
+        VertexStrategy { samplers }
+    }
+
     /// f(wi, wo) per channel (without cos and without the coherent lobe)
     /// into `f` (at least `channels.count()` values).
     pub fn eval_channels(&self, wi: DVec3, wo: DVec3, channels: Channels, f: &mut [f64]) {
@@ -55,43 +110,37 @@ impl Brdf {
     /// Density of `sample_channels`' strategy at wo (non-coherent part):
     /// the RGB strategy's, or the mean over the wavelengths' strategies.
     pub fn pdf_channels(&self, wi: DVec3, wo: DVec3, channels: Channels) -> f64 {
-        match channels {
-            Channels::Rgb => self.pdf(wi, wo, None),
-            Channels::Wavelengths(lambdas) if !lambdas.is_empty() => {
-                let sum: f64 = lambdas
-                    .iter()
-                    .map(|&lambda| self.sampler(wi, Some(lambda)).pdf(wo))
-                    .sum();
-                sum / lambdas.len() as f64
-            }
-            Channels::Wavelengths(_) => 0.0,
-        }
+        self.vertex_strategy(wi, channels).pdf(wo)
     }
 
     /// Probability that `sample_channels` picks the coherent lobe.
     pub fn coherent_probability_channels(&self, wi: DVec3, channels: Channels) -> f64 {
-        match channels {
-            Channels::Rgb => self.coherent_probability(wi, None),
-            Channels::Wavelengths(lambdas) if !lambdas.is_empty() => {
-                let sum: f64 = lambdas
-                    .iter()
-                    .map(|&lambda| self.coherent_probability(wi, Some(lambda)))
-                    .sum();
-                sum / lambdas.len() as f64
-            }
-            Channels::Wavelengths(_) => 0.0,
-        }
+        self.vertex_strategy(wi, channels).coherent_probability()
     }
 
-    /// One sample for a path with these channels. `value` receives, per
-    /// channel, f at the sampled wo (glossy) or the coherent lobe's
-    /// reflectance (coherent); the result's pdf is the mixture density at
-    /// the sampled wo as the caller will see it (`round` maps a direction
-    /// to the caller's precision), or for a coherent sample the mixture's
-    /// probability of the coherent lobe. A failed sample has pdf 0 and
-    /// value 0.
+    /// One sample for a path with these channels (see `sample_with`).
     pub fn sample_channels(
         &self,
+        wi: DVec3,
+        channels: Channels,
+        rnd: [f64; 3],
+        round: impl Fn(DVec3) -> DVec3,
+        value: &mut [f64],
+    ) -> SampleResult {
+        let strategy = self.vertex_strategy(wi, channels);
+        self.sample_with(&strategy, wi, channels, rnd, round, value)
+    }
+
+    /// One sample of `strategy` (made for wi and channels). `value`
+    /// receives, per channel, f at the sampled wo (glossy) or the coherent
+    /// lobe's reflectance (coherent); the result's pdf is the strategy's
+    /// density at the sampled wo as the caller will see it (`round` maps a
+    /// direction to the caller's precision), or for a coherent sample its
+    /// probability of the coherent lobe. A failed sample has pdf 0 and value
+    /// 0.
+    pub fn sample_with(
+        &self,
+        strategy: &VertexStrategy,
         wi: DVec3,
         channels: Channels,
         rnd: [f64; 3],
@@ -105,26 +154,11 @@ impl Brdf {
             pdf: 0.0,
             coherent: false,
         };
-        // The sampling wavelength: rnd[0] picks one and is rescaled for the
-        // strategy's own choices.
-        let (lambda, rnd) = match channels {
-            Channels::Rgb => (None, rnd),
-            Channels::Wavelengths([]) => return failed,
-            Channels::Wavelengths(lambdas) => {
-                let n = lambdas.len();
-                let r0 = if rnd[0] >= 0.0 { rnd[0].min(1.0) } else { 0.0 };
-                let scaled = r0 * n as f64;
-                let j = (scaled as usize).min(n - 1);
-                let rest = (scaled - j as f64).clamp(0.0, 1.0 - f64::EPSILON);
-                (Some(lambdas[j]), [rest, rnd[1], rnd[2]])
-            }
-        };
-        let sampler = self.sampler(wi, lambda);
-        let Some((wo, coherent)) = sampler.sample_direction(rnd) else {
+        let Some((wo, coherent)) = strategy.sample_direction(rnd) else {
             return failed;
         };
         if coherent {
-            let pdf = self.coherent_probability_channels(wi, channels);
+            let pdf = strategy.coherent_probability();
             if !(pdf > 0.0) {
                 return failed;
             }
@@ -143,11 +177,7 @@ impl Brdf {
             };
         }
         let wo = round(wo);
-        let pdf = match channels {
-            // A single strategy: the one at hand.
-            Channels::Rgb | Channels::Wavelengths([_]) => sampler.pdf(wo),
-            _ => self.pdf_channels(wi, wo, channels),
-        };
+        let pdf = strategy.pdf(wo);
         if !(pdf > 0.0 && pdf.is_finite()) {
             return failed;
         }

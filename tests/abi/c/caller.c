@@ -86,6 +86,16 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
         CHECK(27, finite_nonneg(pdf, N) && finite_nonneg(v3, 3 * N), "sample_vertex RGB");
         stam_brdf_sample_vertex(b, N, wi, lam2, 100, rnd, wo_s, pdf, coherent, NULL);
         CHECK(28, pdf[0] == 0.0f && pdf[1] == 0.0f, "nw out of range must give zeros");
+        /* The combined call equals the two separate ones. */
+        float f2b[2 * N], p2b[N], v2b[2 * N], wo_b[3 * N], pdf_b[N];
+        uint8_t coh_b[N];
+        stam_brdf_eval_pdf_vertex(b, N, wi, wo, lam2, 2, f2, p2);
+        stam_brdf_sample_vertex(b, N, wi, lam2, 2, rnd, wo_s, pdf, coherent, v2);
+        stam_brdf_eval_pdf_sample_vertex(b, N, wi, wo, lam2, 2, rnd, f2b, p2b, wo_b, pdf_b, coh_b, v2b);
+        CHECK(29, memcmp(f2, f2b, sizeof f2) == 0 && memcmp(p2, p2b, sizeof p2) == 0 &&
+                      memcmp(wo_s, wo_b, sizeof wo_b) == 0 && memcmp(pdf, pdf_b, sizeof pdf_b) == 0 &&
+                      memcmp(coherent, coh_b, sizeof coh_b) == 0 && memcmp(v2, v2b, sizeof v2b) == 0,
+              "eval_pdf_sample_vertex differs from the separate calls");
     }
 
     uint32_t flags = stam_brdf_flags(b);

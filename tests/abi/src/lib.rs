@@ -87,6 +87,12 @@ mod tests {
             ffi::stam_brdf_sample_vertex as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _, _),
         );
         same_signature(
+            h::stam_brdf_eval_pdf_sample_vertex
+                as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _, _, _, _, _),
+            ffi::stam_brdf_eval_pdf_sample_vertex
+                as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _, _, _, _, _),
+        );
+        same_signature(
             h::stam_brdf_sample as unsafe extern "C" fn(_, _, _, _, _, _, _, _),
             ffi::stam_brdf_sample as unsafe extern "C" fn(_, _, _, _, _, _, _, _),
         );
