@@ -774,6 +774,28 @@ impl Brdf {
         }
     }
 
+    /// The equally weighted mixture of the one-wavelength strategies of
+    /// `lambdas` (each is a single component): the first uniform picks the
+    /// wavelength, and the pdf is the mean of theirs.
+    pub fn mixture_sampler(&self, wi: DVec3, lambdas: &[f64]) -> DirectionSampler<'_> {
+        let Some(wi) = normalize_direction(wi).filter(|d| d.z > MIN_COS) else {
+            return DirectionSampler {
+                brdf: self,
+                wi: DVec3::Z,
+                components: Components::Local(SmallVec::new()),
+            };
+        };
+        let components = lambdas
+            .iter()
+            .map(|&lambda| self.spectral_component(wi, lambda))
+            .collect();
+        DirectionSampler {
+            brdf: self,
+            wi,
+            components: Components::Local(components),
+        }
+    }
+
     fn build_components(
         &self,
         wi: DVec3,

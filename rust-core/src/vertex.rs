@@ -14,7 +14,6 @@ use crate::brdf::Brdf;
 use crate::geometry::PairGeometry;
 use crate::sampling::{DirectionSampler, SampleResult};
 use glam::DVec3;
-use smallvec::{smallvec, SmallVec};
 
 /// The channels of a path: RGB (3 values), or its wavelengths in nm.
 #[derive(Clone, Copy, Debug)]
@@ -33,59 +32,17 @@ impl Channels<'_> {
     }
 }
 
-/// The sampling strategy of one vertex: RGB mode's, or one per wavelength
-/// of the path (the mixture). Built once and used for the pdf towards the
-/// light, the sample and the pdf at the sample.
-pub struct VertexStrategy<'a> {
-    samplers: SmallVec<[DirectionSampler<'a>; 4]>,
-}
-
-impl VertexStrategy<'_> {
-    /// Solid-angle density at wo of the non-coherent part: the mean over
-    /// the wavelengths' strategies (0 for a path without channels).
-    pub fn pdf(&self, wo: DVec3) -> f64 {
-        if self.samplers.is_empty() {
-            return 0.0;
-        }
-        let sum: f64 = self.samplers.iter().map(|s| s.pdf(wo)).sum();
-        sum / self.samplers.len() as f64
-    }
-
-    /// Probability of the coherent lobe.
-    pub fn coherent_probability(&self) -> f64 {
-        if self.samplers.is_empty() {
-            return 0.0;
-        }
-        let sum: f64 = self.samplers.iter().map(|s| s.coherent_probability()).sum();
-        sum / self.samplers.len() as f64
-    }
-
-    /// A direction and whether it is the coherent lobe's: rnd[0] picks the
-    /// wavelength whose strategy draws it and is rescaled for that
-    /// strategy's own choices. None when the sample failed.
-    pub fn sample_direction(&self, rnd: [f64; 3]) -> Option<(DVec3, bool)> {
-        let n = self.samplers.len();
-        if n == 0 {
-            return None;
-        }
-        let r0 = if rnd[0] >= 0.0 { rnd[0].min(1.0) } else { 0.0 };
-        let scaled = r0 * n as f64;
-        let j = (scaled as usize).min(n - 1);
-        let rest = (scaled - j as f64).clamp(0.0, 1.0 - f64::EPSILON);
-        self.samplers[j].sample_direction([rest, rnd[1], rnd[2]])
-    }
-}
-
 impl Brdf {
-    /// The strategy of a vertex at wi for a path with these channels.
-    pub fn vertex_strategy(&self, wi: DVec3, channels: Channels) -> VertexStrategy<'_> {
-        let samplers = match channels {
-            Channels::Rgb => smallvec![self.sampler(wi, None)],
-            Channels::Wavelengths(lambdas) => {
-                lambdas.iter().map(|&l| self.sampler(wi, Some(l))).collect()
-            }
-        };
-        VertexStrategy { samplers }
+    /// The strategy of a vertex at wi for a path with these channels: RGB
+    /// mode's, or the mixture of the wavelengths' strategies. Each of those
+    /// is one equally weighted component (or the RGB mixture), so the
+    /// mixture is a single strategy whose first uniform picks the sampling
+    /// wavelength.
+    pub fn vertex_strategy(&self, wi: DVec3, channels: Channels) -> DirectionSampler<'_> {
+        match channels {
+            Channels::Rgb => self.sampler(wi, None),
+            Channels::Wavelengths(lambdas) => self.mixture_sampler(wi, lambdas),
+        }
     }
 
     /// f(wi, wo) per channel (without cos and without the coherent lobe)
@@ -140,7 +97,7 @@ impl Brdf {
     /// 0.
     pub fn sample_with(
         &self,
-        strategy: &VertexStrategy,
+        strategy: &DirectionSampler,
         wi: DVec3,
         channels: Channels,
         rnd: [f64; 3],
