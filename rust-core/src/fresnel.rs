@@ -105,19 +105,23 @@ pub fn metal_reflectance_exact(table: &MetalTable, cos_theta: f64, lambda_nm: f6
 /// search of the measured wavelengths plus two square roots and two
 /// divisions. A 1 nm index finds the bracketing measured wavelengths without
 /// a search. Interpolation error below 2.5e-5 absolute (measured in the
-/// tests). 120 kB per metal in use, shared by every material of that metal:
+/// tests). 140 kB per metal in use, shared by every material of that metal:
 /// small enough to stay in cache during a render (the 512 linear columns of
 /// an earlier version, 1.1 MB, made every lookup a cache miss there).
 pub struct MetalGrid {
     lambda_nm: Vec<f64>,
-    /// Row i: F at sqrt(cos) = 0, 1/GRID_COS_STEPS, ..., 1 for lambda_nm[i].
-    values: Vec<f32>,
+    /// Row i: F at sqrt(cos) = 0, 1/GRID_COS_STEPS, ..., 1 for lambda_nm[i],
+    /// stored from index 1 with the end columns repeated once before and
+    /// twice after, so that a Catmull-Rom stencil is four contiguous values.
+    rows: Vec<[f32; GRID_ROW]>,
     /// For each whole nanometre from the first row: the index of the last
     /// row at or below it.
     row_of_nm: Vec<u16>,
 }
 
 const GRID_COS_STEPS: usize = 64;
+/// Stored values per row: the GRID_COS_STEPS + 1 columns and 3 of padding.
+const GRID_ROW: usize = GRID_COS_STEPS + 4;
 
 impl MetalGrid {
     fn build(table: &'static MetalTable) -> MetalGrid {
@@ -133,14 +137,17 @@ impl MetalGrid {
         }
         xs.sort_by(f64::total_cmp);
         xs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-        let mut values = Vec::with_capacity(xs.len() * (GRID_COS_STEPS + 1));
-        for &lambda in &xs {
-            let (eta, k) = metal_index(table, lambda);
-            for i in 0..=GRID_COS_STEPS {
-                let root = i as f64 / GRID_COS_STEPS as f64;
-                values.push(conductor_reflectance(root * root, eta, k) as f32);
-            }
-        }
+        let rows = xs
+            .iter()
+            .map(|&lambda| {
+                let (eta, k) = metal_index(table, lambda);
+                let column = |i: usize| {
+                    let root = i.min(GRID_COS_STEPS) as f64 / GRID_COS_STEPS as f64;
+                    conductor_reflectance(root * root, eta, k) as f32
+                };
+                std::array::from_fn(|j| column(j.saturating_sub(1)))
+            })
+            .collect();
         let first = xs[0];
         let span = (xs[xs.len() - 1] - first).ceil() as usize;
         let row_of_nm = (0..=span)
@@ -151,7 +158,7 @@ impl MetalGrid {
             .collect();
         MetalGrid {
             lambda_nm: xs,
-            values,
+            rows,
             row_of_nm,
         }
     }
@@ -159,15 +166,16 @@ impl MetalGrid {
     #[inline]
     pub fn reflectance(&self, cos_theta: f64, lambda_nm: f64) -> f64 {
         let columns = GridColumns::new(cos_theta);
-        self.reflectance_at(&columns, lambda_nm)
+        let (interval, lo, hi) = self.row_pair(&columns, lambda_nm);
+        interval.lerp(lo, hi, lambda_nm)
     }
 
-    /// The reflectance at a wavelength, the cosine's columns given.
+    /// The rows bracketing lambda_nm (clamped at the table ends; NaN to the
+    /// first: callers zero it) and F of both at the columns' cosine.
     #[inline]
-    fn reflectance_at(&self, columns: &GridColumns, lambda_nm: f64) -> f64 {
+    fn row_pair(&self, columns: &GridColumns, lambda_nm: f64) -> (Interval, f64, f64) {
         let xs = &self.lambda_nm;
         let last = xs.len() - 1;
-        // Clamped at the table ends (NaN to the first row: callers zero it).
         let lambda = if lambda_nm >= xs[0] {
             lambda_nm.min(xs[last])
         } else {
@@ -178,28 +186,46 @@ impl MetalGrid {
         while r + 1 < last && xs[r + 1] <= lambda {
             r += 1;
         }
-        let fy = ((lambda - xs[r]) / (xs[r + 1] - xs[r])).clamp(0.0, 1.0);
-        let row = GRID_COS_STEPS + 1;
-        let at = |r: usize| -> f64 {
-            let v = &self.values[r * row..(r + 1) * row];
-            let c = &columns.cols;
-            let w = &columns.weights;
-            w[0] * v[c[0]] as f64
-                + w[1] * v[c[1]] as f64
-                + w[2] * v[c[2]] as f64
-                + w[3] * v[c[3]] as f64
+        let interval = Interval {
+            lo_nm: xs[r],
+            hi_nm: xs[r + 1],
         };
-        let (lo, hi) = (at(r), at(r + 1));
-        lo + fy * (hi - lo)
+        (
+            interval,
+            columns.apply(&self.rows[r]),
+            columns.apply(&self.rows[r + 1]),
+        )
     }
 }
 
-/// The grid columns and Catmull-Rom weights of one incidence cosine
-/// (columns uniform in sqrt(cos): F is steepest towards grazing; the end
-/// columns repeated beyond the ends).
+/// The wavelengths of two adjacent grid rows.
+#[derive(Clone, Copy, Debug)]
+pub struct Interval {
+    lo_nm: f64,
+    hi_nm: f64,
+}
+
+impl Interval {
+    #[inline]
+    fn contains(&self, lambda_nm: f64) -> bool {
+        lambda_nm >= self.lo_nm && lambda_nm <= self.hi_nm
+    }
+
+    /// Linear interpolation of the rows' values (clamped to the interval).
+    #[inline]
+    fn lerp(&self, lo: f64, hi: f64, lambda_nm: f64) -> f64 {
+        let t = ((lambda_nm - self.lo_nm) / (self.hi_nm - self.lo_nm)).clamp(0.0, 1.0);
+        let t = if t.is_nan() { 0.0 } else { t };
+        lo + t * (hi - lo)
+    }
+}
+
+/// The Catmull-Rom stencil of one incidence cosine over the grid columns
+/// (uniform in sqrt(cos): F is steepest towards grazing).
 #[derive(Clone, Copy, Debug)]
 pub struct GridColumns {
-    cols: [usize; 4],
+    /// First of the four stored values (see MetalGrid::rows).
+    first: usize,
     weights: [f64; 4],
 }
 
@@ -213,7 +239,8 @@ impl GridColumns {
         let t2 = t * t;
         let t3 = t2 * t;
         GridColumns {
-            cols: [i.saturating_sub(1), i, i + 1, (i + 2).min(GRID_COS_STEPS)],
+            // Column i - 1 is stored at index i.
+            first: i,
             weights: [
                 0.5 * (-t3 + 2.0 * t2 - t),
                 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
@@ -222,11 +249,20 @@ impl GridColumns {
             ],
         }
     }
+
+    #[inline]
+    fn apply(&self, row: &[f32; GRID_ROW]) -> f64 {
+        let first = self.first.min(GRID_ROW - 4);
+        let v = &row[first..first + 4];
+        let w = &self.weights;
+        w[0] * v[0] as f64 + w[1] * v[1] as f64 + w[2] * v[2] as f64 + w[3] * v[3] as f64
+    }
 }
 
 /// The reflectance at one incidence cosine for any number of wavelengths
-/// (an RGB evaluation of a grating takes a dozen or more): what depends on
-/// the cosine alone is done once.
+/// (an RGB evaluation of a grating takes a dozen or more, often several in
+/// one interval of the grid): what depends on the cosine alone is done once,
+/// and the last pair of grid rows is kept.
 pub enum FresnelAtCos<'a> {
     Constant(f64),
     Direct {
@@ -236,6 +272,7 @@ pub enum FresnelAtCos<'a> {
     Grid {
         grid: &'a MetalGrid,
         columns: GridColumns,
+        last: std::cell::Cell<Option<(Interval, f64, f64)>>,
     },
 }
 
@@ -247,7 +284,21 @@ impl FresnelAtCos<'_> {
             FresnelAtCos::Direct { fresnel, cos_theta } => {
                 fresnel.reflectance(*cos_theta, lambda_nm)
             }
-            FresnelAtCos::Grid { grid, columns } => grid.reflectance_at(columns, lambda_nm),
+            FresnelAtCos::Grid {
+                grid,
+                columns,
+                last,
+            } => {
+                let (interval, lo, hi) = match last.get() {
+                    Some(kept) if kept.0.contains(lambda_nm) => kept,
+                    _ => {
+                        let pair = grid.row_pair(columns, lambda_nm);
+                        last.set(Some(pair));
+                        pair
+                    }
+                };
+                interval.lerp(lo, hi, lambda_nm)
+            }
         }
     }
 }
@@ -263,6 +314,7 @@ impl Fresnel {
             } => FresnelAtCos::Grid {
                 grid,
                 columns: GridColumns::new(cos_theta),
+                last: std::cell::Cell::new(None),
             },
             _ => FresnelAtCos::Direct {
                 fresnel: self,
@@ -373,6 +425,34 @@ mod tests {
         }
         println!("metal reflectance grid: worst absolute error {worst:.2e}");
         assert!(worst < 5e-5, "{worst}");
+    }
+
+    /// The fixed-cosine form (with its kept row pair) gives the plain
+    /// reflectance, for wavelengths in and out of order and out of range.
+    #[test]
+    fn at_cos_matches_reflectance() {
+        for fresnel in [
+            Fresnel::metal(metal_by_name("gold").unwrap()),
+            Fresnel::metal(metal_by_name("aluminium").unwrap()),
+            Fresnel::ComplexIndex { eta: 1.5, k: 3.0 },
+            Fresnel::Constant(0.7),
+        ] {
+            for cos in [0.0, 0.013, 0.5, 0.97, 1.0] {
+                let at = fresnel.at_cos(cos);
+                let mut lambda = 300.0;
+                for step in [0.3, 0.05, 2.7, -1.1, 0.0, 13.0, -40.0, 0.01] {
+                    for _ in 0..20 {
+                        lambda += step;
+                        let direct = fresnel.reflectance(cos, lambda);
+                        let kept = at.reflectance(lambda);
+                        assert!(
+                            (direct - kept).abs() <= 1e-14,
+                            "{cos} {lambda}: {direct} {kept}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]
