@@ -29,7 +29,7 @@ use crate::special::fast_exp;
 use glam::DVec3;
 use smallvec::{smallvec, SmallVec};
 use std::f64::consts::PI;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
 /// Share of the non-coherent probability given to cosine-weighted sampling.
 pub const DEFENSIVE_FRACTION: f64 = 0.1;
@@ -619,21 +619,23 @@ pub struct DirectionSampler<'a> {
     brdf: &'a Brdf,
     wi: DVec3,
     /// Equally weighted components (several in RGB mode).
-    components: Components,
+    components: Components<'a>,
 }
 
 /// A strategy's components: made for the call, inline (the smooth models'
 /// come from their component table: a copy costs less than any cache or
-/// allocation), or shared with a table or cache (gratings).
+/// allocation), or borrowed from the material's grating table (the RGB
+/// rainbow: no copy, and no reference count for the render threads to
+/// contend on).
 // Inline on purpose: a strategy is built per vertex, and a heap allocation
 // per build cost more than moving a few hundred bytes.
 #[allow(clippy::large_enum_variant)]
-enum Components {
+enum Components<'a> {
     Local(SmallVec<[Component; RGB_SAMPLING_NODES]>),
-    Shared(Arc<Vec<Component>>),
+    Shared(&'a [Component]),
 }
 
-impl std::ops::Deref for Components {
+impl std::ops::Deref for Components<'_> {
     type Target = [Component];
     #[inline]
     fn deref(&self) -> &[Component] {
@@ -761,10 +763,10 @@ impl Brdf {
         };
         let components = match (lambda_nm, &self.surface) {
             // Gratings in RGB mode: the table's cell holds the strategy.
-            (None, Surface::Periodic(p)) => Components::Shared(match self.grating_table(p) {
-                Some(table) => table.cell(self, p, wi).rgb.clone(),
-                None => Arc::new(vec![Component::cosine_only()]),
-            }),
+            (None, Surface::Periodic(p)) => match self.grating_table(p) {
+                Some(table) => Components::Shared(&table.cell(self, p, wi).rgb),
+                None => Components::Local(smallvec![Component::cosine_only()]),
+            },
             _ => Components::Local(self.build_components(wi, lambda_nm)),
         };
         DirectionSampler {
@@ -1157,7 +1159,7 @@ struct GratingCell {
     /// propagate nowhere in the cell.
     weights: Vec<f32>,
     /// The RGB strategy made from them.
-    rgb: Arc<Vec<Component>>,
+    rgb: [Component; 1],
 }
 
 impl GratingTable {
@@ -1210,7 +1212,7 @@ impl GratingTable {
             }
             let wi_centre = DVec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt());
             let weights = self.cell_weights(p, wi_centre);
-            let rgb = Arc::new(vec![self.rainbow(brdf, p, wi_centre.z, &weights)]);
+            let rgb = [self.rainbow(brdf, p, wi_centre.z, &weights)];
             GratingCell { weights, rgb }
         })
     }
