@@ -1132,10 +1132,14 @@ const GRATING_TABLE_BYTES: usize = 8 << 20;
 /// Grid of the table over (wi.x, wi.y) in [-1, 1]^2: cells per axis.
 const GRATING_MAX_CELLS_PER_AXIS: usize = 48;
 const GRATING_MIN_CELLS_PER_AXIS: usize = 8;
-/// Smallest cosine of the direction at which an order's weight is taken
-/// (orders just below the horizon at a cell's centre propagate elsewhere in
-/// the cell).
-const GRATING_RIM_COS: f64 = 0.02;
+/// Smallest cosine of the direction at which an order's weight is taken:
+/// orders more grazing than this at a cell's centre, or just below its
+/// horizon (they propagate elsewhere in the cell), are weighted as if at
+/// this cosine. G / w^2 grows without bound towards the rim and
+/// over-weighted them (measured with the sampling_variance example, compact
+/// disc in RGB: variance 7x lower at cos_i 0.08 and 1.4x lower at 30 deg
+/// than with 0.02).
+const GRATING_RIM_COS: f64 = 0.1;
 
 /// Grating order weights tabulated over the incident direction. The
 /// weights only steer the sampling (the pdf is exact for whatever weights),
