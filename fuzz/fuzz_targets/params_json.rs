@@ -67,6 +67,12 @@ fuzz_target!(|data: &[u8]| {
             stam_brdf_coherent_probability(p, n, wi.as_ptr(), lam_ptr, pdf.as_mut_ptr());
             assert!(ok(&pdf) && pdf.iter().all(|&x| x <= 1.0));
         }
+        for (lam_ptr, nw) in [(lam.as_ptr(), n), (std::ptr::null(), 0)] {
+            let (mut f, mut s_val, mut s_wo) = (vec![0f32; 3 * n], vec![0f32; 3 * n], vec![0f32; 3]);
+            let (mut p1, mut s_pdf, mut s_coh) = (0f32, 0f32, 0u8);
+            stam_brdf_eval_pdf_sample_vertex(p, 1, wi.as_ptr(), wo.as_ptr(), lam_ptr, nw, rnd.as_ptr(), f.as_mut_ptr(), &mut p1, s_wo.as_mut_ptr(), &mut s_pdf, &mut s_coh, s_val.as_mut_ptr());
+            assert!(ok(&f) && ok(&[p1, s_pdf]) && ok(&s_val));
+        }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
         stam_brdf_free(p);

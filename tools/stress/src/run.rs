@@ -8,6 +8,9 @@
 //!   or a clean failure (pdf 0); the returned pdf equals stam_brdf_pdf at the
 //!   returned direction; pdf > 0 wherever f > 0 (an unbiased estimator needs
 //!   it); the coherent probability lies in [0, 1];
+//! - the path-vertex calls (4 wavelengths with hostile ones among them, and
+//!   RGB): outputs finite and >= 0, samples sane, and a sample's pdf and
+//!   value equal to the vertex eval at the returned direction;
 //! - every refused material has a non-empty message.
 
 use crate::gen::{self, Rng};
@@ -521,6 +524,95 @@ pub fn run(options: &Options) -> Report {
                 }
             }
         }
+        // The path-vertex ABI: 4 wavelengths per lane (the lane's own, its
+        // neighbours', and every 7th lane a hostile one: 0 or NaN) and RGB.
+        // Every output finite and >= 0, samples sane, and the one-call form
+        // consistent with itself: the sample's pdf and value are the eval's
+        // at the returned direction.
+        const NW: usize = 4;
+        let lam4: Vec<f32> = (0..n * NW)
+            .map(|k| match (k / NW % 7, k % NW) {
+                (0, 3) => 0.0,
+                (3, 2) => f32::NAN,
+                _ => lam32[(k / NW + k % NW) % n],
+            })
+            .collect();
+        for spectral in [true, false] {
+            let (lam_ptr, nc) = if spectral {
+                (lam4.as_ptr(), NW)
+            } else {
+                (std::ptr::null(), 3)
+            };
+            let (mut f, mut pdf) = (vec![0f32; n * nc], vec![0f32; n]);
+            let (mut s_wo, mut s_pdf, mut s_coh, mut s_val) = (
+                vec![0f32; 3 * n],
+                vec![0f32; n],
+                vec![0u8; n],
+                vec![0f32; n * nc],
+            );
+            let (mut f_at, mut pdf_at) = (vec![0f32; n * nc], vec![0f32; n]);
+            unsafe {
+                ffi::stam_brdf_eval_pdf_sample_vertex(
+                    b,
+                    n,
+                    wi32.as_ptr(),
+                    wo32.as_ptr(),
+                    lam_ptr,
+                    NW,
+                    rnd32.as_ptr(),
+                    f.as_mut_ptr(),
+                    pdf.as_mut_ptr(),
+                    s_wo.as_mut_ptr(),
+                    s_pdf.as_mut_ptr(),
+                    s_coh.as_mut_ptr(),
+                    s_val.as_mut_ptr(),
+                );
+                ffi::stam_brdf_eval_pdf_vertex(
+                    b,
+                    n,
+                    wi32.as_ptr(),
+                    s_wo.as_ptr(),
+                    lam_ptr,
+                    NW,
+                    f_at.as_mut_ptr(),
+                    pdf_at.as_mut_ptr(),
+                );
+            }
+            report.evaluations_abi += (2 * nc + 3) as u64 * n as u64;
+            let label = if spectral {
+                "ABI vertex (4 wavelengths)"
+            } else {
+                "ABI vertex (RGB)"
+            };
+            for i in 0..n {
+                let what = ctx(label, i);
+                for c in 0..nc {
+                    report.check_value(f[i * nc + c] as f64, &what);
+                    report.check_value(s_val[i * nc + c] as f64, &what);
+                }
+                report.check_value(pdf[i] as f64, &what);
+                let w = DVec3::new(
+                    s_wo[3 * i] as f64,
+                    s_wo[3 * i + 1] as f64,
+                    s_wo[3 * i + 2] as f64,
+                );
+                check_sample(&mut report, w, s_pdf[i] as f64, s_coh[i] != 0, 1e-5, &what);
+                if s_pdf[i] > 0.0 && s_coh[i] == 0 {
+                    let (a, c) = (s_pdf[i] as f64, pdf_at[i] as f64);
+                    let same_value = (0..nc).all(|c| s_val[i * nc + c] == f_at[i * nc + c]);
+                    if !((a - c).abs() <= AGREEMENT * a.max(c)) || !same_value {
+                        report.pdf_mismatches += 1;
+                        let w = what();
+                        report.fail(format!(
+                            "{w}: vertex sample pdf {a:e} / value {:?} vs eval at its wo {c:e} / {:?}",
+                            &s_val[i * nc..(i + 1) * nc],
+                            &f_at[i * nc..(i + 1) * nc]
+                        ));
+                    }
+                }
+            }
+        }
+
         // Flags and memory must not crash; memory is bounded.
         unsafe {
             let _ = ffi::stam_brdf_flags(b);

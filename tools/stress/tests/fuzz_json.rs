@@ -150,6 +150,38 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
             stam_brdf_coherent_probability(p, n, wi.as_ptr(), lam_ptr, pdf.as_mut_ptr());
             check("coherent_probability", &pdf)?;
         }
+        // The path-vertex call: the lanes' n values as one lane's
+        // wavelengths, and RGB.
+        for (lam_ptr, nw) in [(lam.as_ptr(), n), (std::ptr::null(), 0)] {
+            let mut f = vec![0f32; 3 * n];
+            let mut s_val = vec![0f32; 3 * n];
+            let mut s_wo = vec![0f32; 3];
+            let (mut p1, mut s_pdf, mut s_coh) = (0f32, 0f32, 0u8);
+            stam_brdf_eval_pdf_sample_vertex(
+                p,
+                1,
+                wi.as_ptr(),
+                wo.as_ptr(),
+                lam_ptr,
+                nw,
+                rnd.as_ptr(),
+                f.as_mut_ptr(),
+                &mut p1,
+                s_wo.as_mut_ptr(),
+                &mut s_pdf,
+                &mut s_coh,
+                s_val.as_mut_ptr(),
+            );
+            check("vertex f", &f)?;
+            check("vertex pdf", &[p1, s_pdf])?;
+            check("vertex sample value", &s_val)?;
+            if s_pdf > 0.0 {
+                let len = (s_wo.iter().map(|x| (*x as f64).powi(2)).sum::<f64>()).sqrt();
+                if !((len - 1.0).abs() < 1e-5) {
+                    return Err(format!("vertex sample wo {s_wo:?} is not unit"));
+                }
+            }
+        }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
     }

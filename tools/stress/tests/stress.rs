@@ -37,14 +37,14 @@ fn stress_1e5_evaluations_clean() {
     );
 }
 
-/// The same pipeline with every 1000th ABI spectral output replaced by NaN:
+/// The same pipeline with every 200th ABI spectral output replaced by NaN:
 /// the run must report it.
 #[test]
 fn negative_control_injected_nan_is_caught() {
     let options = Options {
         count: 20_000,
         seed: 3,
-        inject_nan_every: 1000,
+        inject_nan_every: 200,
         ..Options::default()
     };
     let report = run(&options);
