@@ -587,10 +587,10 @@ pub fn run(options: &Options) -> Report {
             for i in 0..n {
                 let what = ctx(label, i);
                 for c in 0..nc {
-                    report.check_value(f[i * nc + c] as f64, &what);
-                    report.check_value(s_val[i * nc + c] as f64, &what);
+                    report.check_value(f[i * nc + c] as f64, what);
+                    report.check_value(s_val[i * nc + c] as f64, what);
                 }
-                report.check_value(pdf[i] as f64, &what);
+                report.check_value(pdf[i] as f64, what);
                 let w = DVec3::new(
                     s_wo[3 * i] as f64,
                     s_wo[3 * i + 1] as f64,
