@@ -102,11 +102,13 @@ Components: 0 = the diffracted (glossy) lobe; 1 = the coherent mirror lobe
 (a delta component, present when the core reports one, e.g. Gaussian
 surfaces).
 
-In spectral variants the BSDF is evaluated at the path's wavelengths. A
-direction is sampled with one of them (the hero), chosen uniformly by the
-first sample, so the returned density, the mean of the core's pdf over all
-the path's wavelengths, is exactly the strategy's density (the unbiased
-multi-wavelength mixture).
+In spectral variants the BSDF is evaluated at the path's wavelengths. The
+core samples a direction with one of them (the hero), chosen uniformly by the
+first sample, and returns the mean of the wavelengths' densities, which is
+exactly the strategy's density (the unbiased multi-wavelength mixture). Each
+query goes to the core's path-vertex calls in one call per batch
+(``eval_pdf_sample`` builds the strategy once for the light direction and the
+sample).
 
 LLVM variants need evaluated mode: ``dr.set_flag(dr.JitFlag.SymbolicLoops,
 False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
