@@ -439,6 +439,20 @@ impl PeriodicSurface {
         }
     }
 
+    /// `rect_s2` at beta_c - d, beta_c, beta_c + d, by the angle-addition
+    /// formulas (two sine-cosine pairs instead of three sines).
+    fn rect_s2_three(&self, beta_c: f64, d: f64) -> [f64; 3] {
+        match &self.model {
+            Model::Rect { height_um, .. } => {
+                let (sa, ca) = (0.5 * beta_c * height_um).sin_cos();
+                let (sd, cd) = (0.5 * d * height_um).sin_cos();
+                let (lo, hi) = (sa * cd - ca * sd, sa * cd + ca * sd);
+                [lo * lo, sa * sa, hi * hi]
+            }
+            Model::Table(_) => [0.0; 3],
+        }
+    }
+
     fn rect_s2(&self, beta: f64) -> f64 {
         match &self.model {
             Model::Rect { height_um, .. } => {
@@ -539,14 +553,15 @@ impl PeriodicSurface {
             // (Gauss-Hermite nodes mu +- sqrt(3) s for a peak inside the band).
             let delta = (3.0f64.sqrt() * s).min(0.5 * (b - a)).max(1e-9);
             let c = mu.clamp(a + delta, b - delta);
-            let s_at = |nu: f64| -> f64 {
+            let s2 = self.rect_s2_three(2.0 * PI * c * w, 2.0 * PI * delta * w);
+            let s_at = |nu: f64, s2: f64| -> f64 {
                 let beta = 2.0 * PI * nu * w;
-                let p = self.power_fast(n, beta, self.rect_s2(beta));
+                let p = self.power_fast(n, beta, s2);
                 reflectance(1000.0 / nu) * nu * nu * p
             };
-            let sm = s_at(c - delta);
-            let s0 = s_at(c);
-            let sp = s_at(c + delta);
+            let sm = s_at(c - delta, s2[0]);
+            let s0 = s_at(c, s2[1]);
+            let sp = s_at(c + delta, s2[2]);
             let d1 = (sp - sm) / (2.0 * delta);
             let d2 = (sp - 2.0 * s0 + sm) / (2.0 * delta * delta);
             let e = c - mu;

@@ -394,6 +394,11 @@ struct RainbowLobe {
     cdf: Vec<f64>,
     /// The order-0 masses (node i), for the pdf.
     zero_order: Vec<f64>,
+    /// The cumulative mass at the end of each order's row, to find the row
+    /// first (a small array that stays in cache) and then the cell within
+    /// it (one row of `cdf`: a few cache lines, where a bisection over all
+    /// of `cdf` touched a dozen).
+    row_cdf: Vec<f64>,
 }
 
 impl RainbowLobe {
@@ -408,7 +413,8 @@ impl RainbowLobe {
 
     fn sample(&self, t: f64, r1: f64, r2: f64) -> (f64, f64) {
         let stride = self.bins + 1;
-        let c = pick_cdf(&self.cdf, t);
+        let row = pick_cdf(&self.row_cdf, t);
+        let c = row * stride + pick_cdf(&self.cdf[row * stride..(row + 1) * stride], t);
         let n = (c / stride) as i64 - self.n_max;
         let i = c % stride;
         if n == 0 {
@@ -1321,13 +1327,14 @@ impl GratingTable {
             .map(|p| p / total)
             .collect();
         let mut acc = 0.0;
-        let cdf = cell
+        let cdf: Vec<f64> = cell
             .iter()
             .map(|p| {
                 acc += p / total;
                 acc
             })
             .collect();
+        let row_cdf = (0..orders).map(|row| cdf[row * stride + bins]).collect();
         Component::new(
             0.0,
             1.0,
@@ -1339,6 +1346,7 @@ impl GratingTable {
                 n_max,
                 y,
                 cdf,
+                row_cdf,
                 zero_order,
             }))),
         )
@@ -1365,7 +1373,9 @@ impl GratingTable {
         let cell = |c: &GratingCell| {
             c.weights.len() * 4
                 + match c.rgb.first().and_then(|c| c.lobe.as_ref()) {
-                    Some(Lobe::Rainbow(r)) => (r.y.len() + r.cdf.len() + r.zero_order.len()) * 8,
+                    Some(Lobe::Rainbow(r)) => {
+                        (r.y.len() + r.cdf.len() + r.zero_order.len() + r.row_cdf.len()) * 8
+                    }
                     _ => 0,
                 }
         };
