@@ -7,7 +7,7 @@
 
 use crate::error::StamError;
 use crate::fractal::FractalSurface;
-use crate::fresnel::Fresnel;
+use crate::fresnel::{Fresnel, FresnelAtCos};
 use crate::gaussian::{GaussianSurface, SeriesSettings};
 use crate::gaussian_rgb::RgbNodeTable;
 use crate::geometry::PairGeometry;
@@ -291,13 +291,22 @@ impl Brdf {
     /// `eval_spectral` for a pair whose geometry is known (several
     /// wavelengths of one pair share it).
     pub fn eval_spectral_at(&self, geom: &PairGeometry, lambda_nm: f64) -> f64 {
+        self.eval_spectral_with(geom, lambda_nm, &self.fresnel.at_cos(geom.cos_half))
+    }
+
+    /// `eval_spectral_at` with the Fresnel term at the pair's cosine given.
+    #[inline]
+    pub fn eval_spectral_with(
+        &self,
+        geom: &PairGeometry,
+        lambda_nm: f64,
+        fresnel: &FresnelAtCos,
+    ) -> f64 {
         if !in_band(lambda_nm) {
             return 0.0;
         }
         let k = wavenumber_per_um(lambda_nm);
-        let f = self.fresnel.reflectance(geom.cos_half, lambda_nm)
-            * geom.geometric_factor
-            * self.kernel(k, geom);
+        let f = fresnel.reflectance(lambda_nm) * geom.geometric_factor * self.kernel(k, geom);
         finite_non_negative(f)
     }
 

@@ -54,8 +54,9 @@ impl Brdf {
                 let out = &mut f[..lambdas.len()];
                 match PairGeometry::new(wi, wo) {
                     Some(geom) => {
+                        let fresnel = self.fresnel.at_cos(geom.cos_half);
                         for (o, &lambda) in out.iter_mut().zip(lambdas) {
-                            *o = self.eval_spectral_at(&geom, lambda);
+                            *o = self.eval_spectral_with(&geom, lambda, &fresnel);
                         }
                     }
                     None => out.fill(0.0),
