@@ -303,6 +303,56 @@ impl FresnelAtCos<'_> {
     }
 }
 
+/// A metal's reflectance at a fixed set of wavelengths (a quadrature rule's
+/// nodes) over the grid's cosine columns, from the measured index at exactly
+/// those wavelengths: with the cosine's stencil (`FresnelAtCos`) a node's
+/// value is four loads, where the grid needs its row search and two rows.
+pub struct NodeReflectance {
+    rows: Vec<[f32; GRID_ROW]>,
+}
+
+impl NodeReflectance {
+    /// None unless `fresnel` is a tabulated metal.
+    pub fn new(fresnel: &Fresnel, lambdas_nm: &[f64]) -> Option<NodeReflectance> {
+        let Fresnel::Metal {
+            table,
+            grid: Some(_),
+        } = fresnel
+        else {
+            return None;
+        };
+        let rows = lambdas_nm
+            .iter()
+            .map(|&lambda| {
+                let (eta, k) = metal_index(table, lambda);
+                let column = |i: usize| {
+                    let root = i.min(GRID_COS_STEPS) as f64 / GRID_COS_STEPS as f64;
+                    conductor_reflectance(root * root, eta, k) as f32
+                };
+                std::array::from_fn(|j| column(j.saturating_sub(1)))
+            })
+            .collect();
+        Some(NodeReflectance { rows })
+    }
+
+    pub fn memory_bytes(&self) -> usize {
+        self.rows.len() * GRID_ROW * 4
+    }
+}
+
+impl FresnelAtCos<'_> {
+    /// The reflectance at node j (wavelength lambda_nm) of `nodes`.
+    #[inline]
+    pub fn at_node(&self, nodes: Option<&NodeReflectance>, j: usize, lambda_nm: f64) -> f64 {
+        match (self, nodes) {
+            (FresnelAtCos::Grid { columns, .. }, Some(nodes)) if j < nodes.rows.len() => {
+                columns.apply(&nodes.rows[j])
+            }
+            _ => self.reflectance(lambda_nm),
+        }
+    }
+}
+
 impl Fresnel {
     /// `reflectance` at a fixed cosine, for many wavelengths.
     #[inline]

@@ -484,6 +484,23 @@ impl PeriodicSurface {
     /// be negative (sRGB matching functions have negative lobes); the result
     /// is always finite.
     pub fn kernel_rgb(&self, geom: &PairGeometry, reflectance: &dyn Fn(f64) -> f64) -> [f64; 3] {
+        let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
+        self.kernel_rgb_with(geom, reflectance, &|j| reflectance(rule.lambda_nm[j]))
+    }
+
+    /// The wavelengths of the rule for broad peaks (see `kernel_rgb`).
+    pub fn broad_rule_wavelengths() -> &'static [f64] {
+        &spectrum::smooth_rule(RGB_SMOOTH_NODES).lambda_nm
+    }
+
+    /// `kernel_rgb` with the reflectance at the broad rule's nodes given by
+    /// node index (`broad_rule_wavelengths`), which a caller may tabulate.
+    pub fn kernel_rgb_with(
+        &self,
+        geom: &PairGeometry,
+        reflectance: &dyn Fn(f64) -> f64,
+        node_reflectance: &dyn Fn(usize) -> f64,
+    ) -> [f64; 3] {
         let mut out = [0.0; 3];
         let (u, v, w) = (geom.u, geom.v, geom.w);
         if !(w < 0.0 && u.is_finite() && v.is_finite()) {
@@ -604,7 +621,7 @@ impl PeriodicSurface {
                         add(n);
                     }
                 }
-                let val = reflectance(rule.lambda_nm[j]) * nu * nu * c_const * sum;
+                let val = node_reflectance(j) * nu * nu * c_const * sum;
                 for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
                     *o += wt * val;
                 }
