@@ -137,17 +137,7 @@ impl MetalGrid {
         }
         xs.sort_by(f64::total_cmp);
         xs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-        let rows = xs
-            .iter()
-            .map(|&lambda| {
-                let (eta, k) = metal_index(table, lambda);
-                let column = |i: usize| {
-                    let root = i.min(GRID_COS_STEPS) as f64 / GRID_COS_STEPS as f64;
-                    conductor_reflectance(root * root, eta, k) as f32
-                };
-                std::array::from_fn(|j| column(j.saturating_sub(1)))
-            })
-            .collect();
+        let rows = xs.iter().map(|&lambda| grid_row(table, lambda)).collect();
         let first = xs[0];
         let span = (xs[xs.len() - 1] - first).ceil() as usize;
         let row_of_nm = (0..=span)
@@ -196,6 +186,17 @@ impl MetalGrid {
             columns.apply(&self.rows[r + 1]),
         )
     }
+}
+
+/// One grid row: F at sqrt(cos) = 0, 1/GRID_COS_STEPS, ..., 1 for the
+/// metal's index at lambda_nm, padded as MetalGrid::rows describes.
+fn grid_row(table: &MetalTable, lambda_nm: f64) -> [f32; GRID_ROW] {
+    let (eta, k) = metal_index(table, lambda_nm);
+    let column = |i: usize| {
+        let root = i.min(GRID_COS_STEPS) as f64 / GRID_COS_STEPS as f64;
+        conductor_reflectance(root * root, eta, k) as f32
+    };
+    std::array::from_fn(|j| column(j.saturating_sub(1)))
 }
 
 /// The wavelengths of two adjacent grid rows.
@@ -323,14 +324,7 @@ impl NodeReflectance {
         };
         let rows = lambdas_nm
             .iter()
-            .map(|&lambda| {
-                let (eta, k) = metal_index(table, lambda);
-                let column = |i: usize| {
-                    let root = i.min(GRID_COS_STEPS) as f64 / GRID_COS_STEPS as f64;
-                    conductor_reflectance(root * root, eta, k) as f32
-                };
-                std::array::from_fn(|j| column(j.saturating_sub(1)))
-            })
+            .map(|&lambda| grid_row(table, lambda))
             .collect();
         Some(NodeReflectance { rows })
     }

@@ -1213,18 +1213,9 @@ impl GratingTable {
         let (ix, iy) = (index(wi.x), index(wi.y));
         self.cells[iy * n + ix].get_or_init(|| {
             let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / n as f64;
-            let (mut x, mut y) = (centre(ix), centre(iy));
             // Corner cells reach outside the disk: their centre moves onto
             // the rim.
-            let (r, r_max) = (
-                (x * x + y * y).sqrt(),
-                (1.0 - GRATING_RIM_COS.powi(2)).sqrt(),
-            );
-            if r > r_max {
-                x *= r_max / r;
-                y *= r_max / r;
-            }
-            let wi_centre = DVec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt());
+            let wi_centre = within_rim(centre(ix), centre(iy));
             let weights = self.cell_weights(p, wi_centre);
             let rgb = [self.rainbow(brdf, p, wi_centre.z, &weights)];
             GratingCell { weights, rgb }
@@ -1442,7 +1433,12 @@ fn grating_component(brdf: &Brdf, p: &PeriodicSurface, wi: DVec3, lambda_nm: f64
 /// Direction of a grating order's centre (u, v) = (u_n, 0) for wi, moved
 /// onto the rim (cosine GRATING_RIM_COS) when it is below it.
 fn rim_direction(wi: DVec3, u_n: f64) -> DVec3 {
-    let (mut x, mut y) = (-wi.x - u_n, -wi.y);
+    within_rim(-wi.x - u_n, -wi.y)
+}
+
+/// The direction over (x, y), moved radially onto the rim (cosine
+/// GRATING_RIM_COS) when it lies beyond it.
+fn within_rim(mut x: f64, mut y: f64) -> DVec3 {
     let (r, r_max) = (
         (x * x + y * y).sqrt(),
         (1.0 - GRATING_RIM_COS.powi(2)).sqrt(),
