@@ -78,7 +78,7 @@ pub struct SampleResult {
 }
 
 impl SampleResult {
-    fn failed() -> SampleResult {
+    pub(crate) fn failed() -> SampleResult {
         SampleResult {
             wo: DVec3::Z,
             pdf: 0.0,
@@ -696,6 +696,13 @@ impl DirectionSampler<'_> {
     }
 
     pub fn sample(&self, rnd: [f64; 3]) -> SampleResult {
+        self.sample_mapped(rnd, |wo| wo)
+    }
+
+    /// `sample`, with a glossy direction mapped by `map` (e.g. rounded to
+    /// the caller's precision) before its pdf is taken, so that the pdf is
+    /// the one at the direction the caller gets.
+    pub fn sample_mapped(&self, rnd: [f64; 3], map: impl Fn(DVec3) -> DVec3) -> SampleResult {
         match self.sample_direction(rnd) {
             Some((wo, true)) => SampleResult {
                 wo,
@@ -703,6 +710,7 @@ impl DirectionSampler<'_> {
                 coherent: true,
             },
             Some((wo, false)) => {
+                let wo = map(wo);
                 let pdf = self.pdf(wo);
                 if pdf > 0.0 && pdf.is_finite() {
                     SampleResult {
@@ -719,10 +727,8 @@ impl DirectionSampler<'_> {
     }
 
     /// The direction `sample` draws and whether it is the coherent lobe's,
-    /// without its pdf (callers that evaluate the pdf at a rounded or
-    /// otherwise mapped direction skip one evaluation); None when the
-    /// sample failed.
-    pub fn sample_direction(&self, rnd: [f64; 3]) -> Option<(DVec3, bool)> {
+    /// without its pdf; None when the sample failed.
+    fn sample_direction(&self, rnd: [f64; 3]) -> Option<(DVec3, bool)> {
         let count = self.components.len();
         if count == 0 {
             return None;

@@ -107,19 +107,11 @@ impl Brdf {
     ) -> SampleResult {
         let nc = channels.count();
         value[..nc].fill(0.0);
-        let failed = SampleResult {
-            wo: DVec3::Z,
-            pdf: 0.0,
-            coherent: false,
-        };
-        let Some((wo, coherent)) = strategy.sample_direction(rnd) else {
-            return failed;
-        };
-        if coherent {
-            let pdf = strategy.coherent_probability();
-            if !(pdf > 0.0) {
-                return failed;
-            }
+        let s = strategy.sample_mapped(rnd, round);
+        if !(s.pdf > 0.0) {
+            return SampleResult::failed();
+        }
+        if s.coherent {
             match channels {
                 Channels::Rgb => value[..3].copy_from_slice(&self.coherent_rgb(wi)),
                 Channels::Wavelengths(lambdas) => {
@@ -128,23 +120,10 @@ impl Brdf {
                     }
                 }
             }
-            return SampleResult {
-                wo,
-                pdf,
-                coherent: true,
-            };
+        } else {
+            self.eval_channels(wi, s.wo, channels, value);
         }
-        let wo = round(wo);
-        let pdf = strategy.pdf(wo);
-        if !(pdf > 0.0 && pdf.is_finite()) {
-            return failed;
-        }
-        self.eval_channels(wi, wo, channels, value);
-        SampleResult {
-            wo,
-            pdf,
-            coherent: false,
-        }
+        s
     }
 }
 
