@@ -383,12 +383,6 @@ pub unsafe extern "C" fn stam_brdf_sample_vertex(
     coherent: *mut u8,
     value: *mut f32,
 ) {
-    // Without somewhere to put the sample: zeros.
-    let b = if rnd.is_null() || wo.is_null() || pdf.is_null() {
-        std::ptr::null()
-    } else {
-        b
-    };
     let null = std::ptr::null_mut();
     vertex_queries(
         b,
@@ -420,11 +414,9 @@ pub unsafe extern "C" fn stam_brdf_eval_pdf_sample_vertex(
     s_coherent: *mut u8,
     s_value: *mut f32,
 ) {
-    let b = if rnd.is_null() || s_wo.is_null() || s_pdf.is_null() {
-        std::ptr::null() // outputs zeroed
-    } else {
-        b
-    };
+    // The sample part is required here: without rnd, zeros (vertex_queries
+    // would take all-NULL sample pointers for an eval-only call).
+    let b = if rnd.is_null() { std::ptr::null() } else { b };
     vertex_queries(
         b,
         n,
@@ -438,8 +430,9 @@ pub unsafe extern "C" fn stam_brdf_eval_pdf_sample_vertex(
 
 /// The vertex queries of n lanes, sharing each lane's strategy: an eval
 /// part (wo, f, pdf: wo NULL for none, f or pdf NULL to skip) and a sample
-/// part (rnd, wo, pdf, coherent, value: rnd NULL for none). Outputs are
-/// zeroed for a NULL material or wi, nw out of range, or a caught panic.
+/// part (rnd, wo, pdf, coherent, value: all NULL for none). Outputs are
+/// zeroed for a NULL material or wi, nw out of range, a sample part
+/// missing one of rnd, wo and pdf, or a caught panic.
 #[allow(clippy::type_complexity)]
 unsafe fn vertex_queries(
     b: *const StamBrdf,
@@ -455,7 +448,10 @@ unsafe fn vertex_queries(
     }
     let nc = channel_count(lambda_nm, nw);
     let eval = !wo.is_null() && (!f.is_null() || !pdf.is_null());
-    let sample = !rnd.is_null();
+    // A sample part is asked for by any of its inputs or required outputs,
+    // and needs all three.
+    let sample = !rnd.is_null() && !s_wo.is_null() && !s_pdf.is_null();
+    let sample_incomplete = !sample && (!rnd.is_null() || !s_wo.is_null() || !s_pdf.is_null());
     let zero = || {
         let fill = |p: *mut f32, len: usize| {
             if !p.is_null() {
@@ -475,9 +471,10 @@ unsafe fn vertex_queries(
     let Some(nc) = nc else {
         return zero();
     };
-    if b.is_null() || wi.is_null() || (!eval && !sample) {
+    if b.is_null() || wi.is_null() || (!eval && !sample) || sample_incomplete {
         return zero();
     }
+    let needs_strategy = sample || !pdf.is_null();
     let brdf = &(*b).brdf;
     // The caller sees f32 directions: a sample's pdf and value are taken there.
     let round = |w: DVec3| DVec3::new(w.x as f32 as f64, w.y as f32 as f64, w.z as f32 as f64);
@@ -487,7 +484,6 @@ unsafe fn vertex_queries(
         for i in 0..n {
             let channels = lane_channels(lambda_nm, nw, i, &mut buf);
             let wi_i = direction(wi, i);
-            let needs_strategy = sample || !pdf.is_null();
             let strategy = needs_strategy.then(|| brdf.vertex_strategy(wi_i, channels));
             if eval {
                 let wo_i = direction(wo, i);
