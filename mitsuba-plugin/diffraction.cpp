@@ -169,7 +169,7 @@ struct Batch {
 /// one per thread, so that a call allocates nothing once the buffers have
 /// grown (a dozen malloc/free pairs per call were ~8% of a scalar render).
 struct Scratch {
-    std::vector<float> aos, wo, pdf, val;
+    std::vector<float> aos, wo, val;
     std::vector<uint8_t> coh;
 };
 
@@ -212,19 +212,19 @@ void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b, Scratch &
     }
     if (b.want_sample) {
         tmp.wo.resize(3 * n);
-        tmp.pdf.resize(n);
+        b.s_pdf.resize(n);
         tmp.coh.resize(n);
         tmp.val.resize(core_nc * n);
     }
     if (eval && b.want_sample)
         stam_brdf_eval_pdf_sample_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw,
-                                         b.rnd.data(), f, pdf, tmp.wo.data(), tmp.pdf.data(),
+                                         b.rnd.data(), f, pdf, tmp.wo.data(), b.s_pdf.data(),
                                          tmp.coh.data(), tmp.val.data());
     else if (eval)
         stam_brdf_eval_pdf_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw, f, pdf);
     else if (b.want_sample)
         stam_brdf_sample_vertex(core, n, b.wi.data(), lam, core_nw, b.rnd.data(),
-                                tmp.wo.data(), tmp.pdf.data(), tmp.coh.data(), tmp.val.data());
+                                tmp.wo.data(), b.s_pdf.data(), tmp.coh.data(), tmp.val.data());
 
     if (b.want_f) {
         b.f.resize(nc * n);
@@ -233,7 +233,6 @@ void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b, Scratch &
     if (b.want_sample) {
         b.s_wo.resize(3 * n);
         to_soa(tmp.wo.data(), n, 3, Channels::Rgb, b.s_wo.data());
-        b.s_pdf.assign(tmp.pdf.begin(), tmp.pdf.end());
         b.s_coh.resize(n);
         for (size_t i = 0; i < n; ++i)
             b.s_coh[i] = tmp.coh[i] ? 1.f : 0.f;
