@@ -492,22 +492,14 @@ impl ProfileData {
         }
         let i = s as usize;
         let t = s - i as f64;
-        let yi = self.y0 + i as f64 * self.h;
-        let (d0c, d0cc) = self.cdf_derivs(i, yi);
-        let (d1c, d1cc) = self.cdf_derivs(i + 1, yi + self.h);
+        let [d0c, d0cc] = self.cdf_slopes[i];
+        let [d1c, d1cc] = self.cdf_slopes[i + 1];
         let a = self.cdf[i];
         let b = self.cdf[i + 1];
         (
             hermite(a[0], b[0], d0c, d1c, self.h, t),
             hermite(a[1], b[1], d0cc, d1cc, self.h, t),
         )
-    }
-
-    /// d ln cdf/dy and d ln ccdf/dy at node i.
-    #[inline]
-    fn cdf_derivs(&self, i: usize, _yi: f64) -> (f64, f64) {
-        let [c, cc] = self.cdf_slopes[i];
-        (c, cc)
     }
 
     /// y with ln cdf(y) = l (l <= ln 1/2).
@@ -574,8 +566,8 @@ impl ProfileData {
     /// Solve the Hermite interpolant of column col in cell i for the value l.
     fn solve_cell(&self, i: usize, l: f64, col: usize) -> f64 {
         let yi = self.y0 + i as f64 * self.h;
-        let (a0, a1) = self.cdf_derivs(i, yi);
-        let (b0, b1) = self.cdf_derivs(i + 1, yi + self.h);
+        let [a0, a1] = self.cdf_slopes[i];
+        let [b0, b1] = self.cdf_slopes[i + 1];
         let (d0, d1) = if col == 0 { (a0, b0) } else { (a1, b1) };
         let f0 = self.cdf[i][col];
         let f1 = self.cdf[i + 1][col];
