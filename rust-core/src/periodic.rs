@@ -49,7 +49,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use crate::geometry::PairGeometry;
-use crate::special::fast_exp;
+use crate::special::{fast_exp, fast_exp_vectorisable, sin_squared};
 use num_complex::Complex64;
 use std::f64::consts::PI;
 
@@ -285,11 +285,7 @@ impl PeriodicSurface {
                 height_um,
                 fill,
                 sinc2,
-            } => {
-                let s = (0.5 * beta * height_um).sin();
-                let s2 = s * s;
-                rect_power(n, s2, *fill, sinc2)
-            }
+            } => rect_power(n, sin_squared(0.5 * beta * height_um), *fill, sinc2),
             Model::Table(table) => {
                 // |c_n(beta)|^2 = |c_-n(-beta)|^2 for real heights.
                 let (n_t, b_t) = if beta > 0.0 { (-n, -beta) } else { (n, beta) };
@@ -305,8 +301,7 @@ impl PeriodicSurface {
     fn direct_power(&self, n: i64, beta: f64) -> f64 {
         match &self.profile {
             Profile::Rect { height_um, .. } => {
-                let s = (0.5 * beta * height_um).sin();
-                rect_power(n, s * s, self.fill(), &[])
+                rect_power(n, sin_squared(0.5 * beta * height_um), self.fill(), &[])
             }
             Profile::Sine { height_um } => {
                 let x = (0.5 * beta * height_um).abs();
@@ -382,8 +377,7 @@ impl PeriodicSurface {
                 fill,
                 sinc2,
             } => {
-                let s = (0.5 * beta * height_um).sin();
-                let s2 = s * s;
+                let s2 = sin_squared(0.5 * beta * height_um);
                 for n in lo..=hi {
                     let d = l * (ku - g * n as f64);
                     let e = d * d + e_v;
@@ -455,10 +449,7 @@ impl PeriodicSurface {
 
     fn rect_s2(&self, beta: f64) -> f64 {
         match &self.model {
-            Model::Rect { height_um, .. } => {
-                let s = (0.5 * beta * height_um).sin();
-                s * s
-            }
+            Model::Rect { height_um, .. } => sin_squared(0.5 * beta * height_um),
             Model::Table(_) => 0.0,
         }
     }
@@ -586,41 +577,16 @@ impl PeriodicSurface {
             let a1 = d1 - 2.0 * d2 * e;
             let a2 = d2;
             let m = peak_moments(mu, s, nu_lo, nu_hi);
-            let scale = c_const * (-a_n).exp();
+            let scale = c_const * fast_exp(-a_n);
             for (ch, o) in out.iter_mut().enumerate() {
                 *o += scale * (a0 * m[0][ch] + a1 * m[1][ch] + a2 * m[2][ch]);
             }
         }
         if n_broad > 0 || broad_overflow {
             let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
-            let g = 2.0 * PI / lam;
-            let broad = &broad[..n_broad];
-            for (j, &nu) in rule.nu_per_um.iter().enumerate() {
-                let k = 2.0 * PI * nu;
-                let beta = k * w;
-                let s2 = self.rect_s2(beta);
-                let e_v = (l * k * v).powi(2);
-                let mut sum = 0.0;
-                let mut add = |n: i64| {
-                    let d = l * (k * u - g * n as f64);
-                    let e = d * d + e_v;
-                    if e < EXP_UNDERFLOW {
-                        sum += self.power_fast(n, beta, s2) * fast_exp(-e);
-                    }
-                };
-                if broad_overflow {
-                    // Pathological: more broad orders than slots; take every
-                    // order the spectral kernel would at this node (this
-                    // includes the narrow ones, so drop those above).
-                    let (lo, hi) = self.orders_near(k, u);
-                    for n in lo..=hi {
-                        add(n);
-                    }
-                } else {
-                    for &n in broad {
-                        add(n);
-                    }
-                }
+            let orders = (!broad_overflow).then_some(&broad[..n_broad]);
+            let sums = self.broad_sums(&rule.nu_per_um, u, v, w, orders);
+            for (j, (&nu, sum)) in rule.nu_per_um.iter().zip(sums).enumerate() {
                 let val = node_reflectance(j) * nu * nu * c_const * sum;
                 for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
                     *o += wt * val;
@@ -633,6 +599,82 @@ impl PeriodicSurface {
             }
         }
         out
+    }
+
+    /// Per node nu of the broad-peak rule, sum over `orders` (None: every
+    /// order the spectral kernel would take at that node) of |c_n|^2
+    /// exp(-E_n(nu)). For rectangular profiles, whose |c_n|^2 is linear in
+    /// sin^2(beta h / 2), the loop over the nodes has no branches and no
+    /// library calls and vectorises: this is most of an RGB evaluation near
+    /// a grating's mirror direction.
+    fn broad_sums(
+        &self,
+        nu_per_um: &[f64],
+        u: f64,
+        v: f64,
+        w: f64,
+        orders: Option<&[i64]>,
+    ) -> [f64; RGB_SMOOTH_NODES] {
+        let mut sums = [0.0; RGB_SMOOTH_NODES];
+        let l = self.coherence_um;
+        let g = 2.0 * PI / self.period_um;
+        if let (
+            Model::Rect {
+                height_um,
+                fill,
+                sinc2,
+            },
+            Some(orders),
+            Some(nu),
+        ) = (
+            &self.model,
+            orders,
+            nu_per_um.first_chunk::<RGB_SMOOTH_NODES>(),
+        ) {
+            // Below exp(-700) a term is dropped (fast_exp_vectorisable does
+            // not underflow to 0 by itself).
+            const EXP_FLOOR: f64 = 700.0;
+            let s2: [f64; RGB_SMOOTH_NODES] =
+                std::array::from_fn(|j| sin_squared(PI * height_um * w * nu[j]));
+            let lk: [f64; RGB_SMOOTH_NODES] = std::array::from_fn(|j| 2.0 * PI * l * nu[j]);
+            for &n in orders {
+                let (c0, c1) = rect_power_coefficients(n, *fill, sinc2);
+                let lg = l * g * n as f64;
+                for j in 0..RGB_SMOOTH_NODES {
+                    let d = lk[j].mul_add(u, -lg);
+                    let ev = lk[j] * v;
+                    let e = d.mul_add(d, ev * ev);
+                    let power = c1.mul_add(s2[j], c0).max(0.0);
+                    let term = power * fast_exp_vectorisable(-e);
+                    sums[j] += if e < EXP_FLOOR { term } else { 0.0 };
+                }
+            }
+            return sums;
+        }
+        for (sum, &nu) in sums.iter_mut().zip(nu_per_um) {
+            let k = 2.0 * PI * nu;
+            let beta = k * w;
+            let s2 = self.rect_s2(beta);
+            let e_v = (l * k * v).powi(2);
+            let mut add = |n: i64| {
+                let d = l * (k * u - g * n as f64);
+                let e = d * d + e_v;
+                if e < EXP_UNDERFLOW {
+                    *sum += self.power_fast(n, beta, s2) * fast_exp(-e);
+                }
+            };
+            match orders {
+                Some(orders) => orders.iter().for_each(|&n| add(n)),
+                // Pathological: more broad orders than slots; take every
+                // order the spectral kernel would at this node (the peak
+                // width does not depend on n, so none of them is narrow).
+                None => {
+                    let (lo, hi) = self.orders_near(k, u);
+                    (lo..=hi).for_each(add);
+                }
+            }
+        }
+        sums
     }
 }
 
@@ -690,6 +732,15 @@ fn sinc(x: f64) -> f64 {
     } else {
         (PI * x).sin() / (PI * x)
     }
+}
+
+/// `rect_power(n, s2, ..)` = max(c0 + c1 s2, 0) with (c0, c1) from here.
+#[inline]
+fn rect_power_coefficients(n: i64, fill: f64, sinc2: &[f64]) -> (f64, f64) {
+    if n == 0 {
+        return (1.0, -4.0 * fill * (1.0 - fill));
+    }
+    (0.0, rect_power(n, 1.0, fill, sinc2))
 }
 
 /// |c_n|^2 of the rectangular profile given s2 = sin^2(beta b / 2).
