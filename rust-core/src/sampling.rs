@@ -392,8 +392,9 @@ struct RainbowLobe {
     /// (i < bins), node i for n = 0 (searched by bisection: hundreds of
     /// cells for a compact disc).
     cdf: Vec<f64>,
-    /// The order-0 masses (node i), for the pdf.
-    zero_order: Vec<f64>,
+    /// Order 0's Gaussians for the pdf, widest (last node) first: [1 / (2
+    /// s_i^2), mass_i / (2 pi s_i^2)] (no divisions in the pdf's loop).
+    zero_order: Vec<[f64; 2]>,
     /// The cumulative mass at the end of each order's row, to find the row
     /// first (a small array that stays in cache) and then the cell within
     /// it (one row of `cdf`: a few cache lines, where a bisection over all
@@ -401,10 +402,15 @@ struct RainbowLobe {
     row_cdf: Vec<f64>,
 }
 
+/// The rainbow's Gaussian sd in u and v at lambda: 1 / (sqrt(2) k l) with
+/// k = 2 pi 1000 / lambda_nm.
+fn rainbow_sigma(lambda_nm: f64, coherence_um: f64) -> f64 {
+    lambda_nm / (2000.0 * PI * std::f64::consts::SQRT_2 * coherence_um)
+}
+
 impl RainbowLobe {
     fn sigma(&self, lambda_nm: f64) -> f64 {
-        // 1 / (sqrt(2) k l) with k = 2 pi 1000 / lambda_nm.
-        lambda_nm / (2000.0 * PI * std::f64::consts::SQRT_2 * self.coherence_um)
+        rainbow_sigma(lambda_nm, self.coherence_um)
     }
 
     fn node(&self, i: usize) -> f64 {
@@ -444,14 +450,13 @@ impl RainbowLobe {
         // Order 0: Gaussians at the nodes, widest (last) first: once one
         // underflows, the narrower ones do too.
         let rho2 = u * u + v * v;
-        for (i, &p) in self.zero_order.iter().enumerate().rev() {
-            let s = self.sigma(self.node(i));
-            let e = rho2 / (2.0 * s * s);
+        for &[inv_2s2, scale] in &self.zero_order {
+            let e = rho2 * inv_2s2;
             if !(e < 745.0) {
                 break;
             }
-            if p > 0.0 {
-                sum += p * fast_exp(-e) / (2.0 * PI * s * s);
+            if scale > 0.0 {
+                sum += scale * fast_exp(-e);
             }
         }
         // Orders n != 0 whose rainbow passes through u: lambda = Lam |u| / |n|.
@@ -1319,9 +1324,13 @@ impl GratingTable {
         }
         y.iter_mut().for_each(|p| *p /= total);
         let row0 = n_max as usize * stride;
-        let zero_order = cell[row0..row0 + stride]
-            .iter()
-            .map(|p| p / total)
+        let zero_order = (0..stride)
+            .rev()
+            .map(|i| {
+                let s = rainbow_sigma(lo + i as f64 * bin_nm, p.coherence_um());
+                let mass = cell[row0 + i] / total;
+                [1.0 / (2.0 * s * s), mass / (2.0 * PI * s * s)]
+            })
             .collect();
         let mut acc = 0.0;
         let cdf: Vec<f64> = cell
@@ -1371,7 +1380,7 @@ impl GratingTable {
             c.weights.len() * 4
                 + match c.rgb.first().and_then(|c| c.lobe.as_ref()) {
                     Some(Lobe::Rainbow(r)) => {
-                        (r.y.len() + r.cdf.len() + r.zero_order.len() + r.row_cdf.len()) * 8
+                        (r.y.len() + r.cdf.len() + 2 * r.zero_order.len() + r.row_cdf.len()) * 8
                     }
                     _ => 0,
                 }
