@@ -92,7 +92,7 @@ test: setup lint test-rust test-python
 # ns per evaluation (docs/performance.md) and run time against error of every
 # accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
 bench-render: plugin
-	$(PYTHON) scripts/bench_render.py --write docs/plugin_speed.md
+	$(PYTHON) scripts/bench_render.py --repeats 7 --processes 3 --write docs/plugin_speed.md
 
 bench:
 	$(CARGO) bench -p stam-core --bench brdf
