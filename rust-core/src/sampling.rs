@@ -778,18 +778,10 @@ impl Brdf {
                 components: Components::Local(SmallVec::new()),
             };
         };
-        let components = match (lambda_nm, &self.surface) {
-            // Gratings in RGB mode: the table's cell holds the strategy.
-            (None, Surface::Periodic(p)) => match self.grating_table(p) {
-                Some(table) => Components::Shared(&table.cell(self, p, wi).rgb),
-                None => Components::Local(smallvec![Component::cosine_only()]),
-            },
-            _ => Components::Local(self.build_components(wi, lambda_nm)),
-        };
         DirectionSampler {
             brdf: self,
             wi,
-            components,
+            components: self.components(wi, lambda_nm),
         }
     }
 
@@ -815,31 +807,22 @@ impl Brdf {
         }
     }
 
-    fn build_components(
-        &self,
-        wi: DVec3,
-        lambda_nm: Option<f64>,
-    ) -> SmallVec<[Component; RGB_SAMPLING_NODES]> {
-        match lambda_nm {
-            Some(lambda) => smallvec![self.spectral_component(wi, lambda)],
-            None => match &self.surface {
-                Surface::Periodic(p) => {
-                    smallvec![self
-                        .grating_table(p)
-                        .map_or_else(Component::cosine_only, |table| {
-                            let cell = table.cell(self, p, wi);
-                            let Some(Lobe::Rainbow(r)) = cell.rgb[0].lobe.as_ref() else {
-                                return Component::cosine_only();
-                            };
-                            // The same strategy, as a copy that can be altered.
-                            Component::new(0.0, 1.0, Some(Lobe::Rainbow(r.clone())))
-                        })]
-                }
-                _ => rgb_sampling_nodes()
+    /// The components of `sampler`'s strategy at wi (unit, above the
+    /// horizon).
+    fn components(&self, wi: DVec3, lambda_nm: Option<f64>) -> Components<'_> {
+        match (lambda_nm, &self.surface) {
+            (Some(lambda), _) => Components::Local(smallvec![self.spectral_component(wi, lambda)]),
+            // Gratings in RGB mode: the table's cell holds the strategy.
+            (None, Surface::Periodic(p)) => match self.grating_table(p) {
+                Some(table) => Components::Shared(&table.cell(self, p, wi).rgb),
+                None => Components::Local(smallvec![Component::cosine_only()]),
+            },
+            (None, _) => Components::Local(
+                rgb_sampling_nodes()
                     .iter()
                     .map(|&lambda| self.spectral_component(wi, lambda))
                     .collect(),
-            },
+            ),
         }
     }
 
@@ -2118,19 +2101,21 @@ mod tests {
         run_fits("sine", &material(SINE), &[Some(480.0), None], CHI2_SAMPLES);
     }
 
-    /// The per-thread strategy cache never serves one material's (or one
-    /// wavelength's) strategy for another: alternating between materials and
-    /// wavelengths at the same wi gives the uncached pdfs exactly, and a
-    /// material dropped and rebuilt with other parameters is not confused
-    /// with the old one.
+    /// Nothing is shared between materials or wavelengths that one could
+    /// serve for another (the strategies' tables are per material; a
+    /// per-thread cache of strategies once was not): alternating between
+    /// materials and wavelengths at the same wi gives each one's own pdfs
+    /// exactly, and a material dropped and rebuilt with other parameters is
+    /// not confused with the old one.
     #[test]
     fn strategy_is_a_function_of_material_wi_and_wavelength() {
         let wi = incidences()[1].1;
         let wo = DVec3::new(-0.5, -0.3, 0.81).normalize();
         let a = material(MEDIUM);
         let b = material(ROUGH);
+        let c = material(CD_SHORT);
         for _ in 0..3 {
-            for brdf in [&a, &b] {
+            for brdf in [&a, &b, &c] {
                 for lambda in [Some(450.0), Some(650.0), None] {
                     let cached = brdf.pdf(wi, wo, lambda);
                     let fresh = uncached(brdf, wi, lambda).pdf(wo);
@@ -2232,12 +2217,17 @@ mod tests {
         }
     }
 
-    /// A strategy built outside the per-thread cache, to be altered.
+    /// `sampler`'s strategy as a copy that can be altered (a grating's RGB
+    /// strategy is otherwise borrowed from its table).
     fn uncached(brdf: &Brdf, wi: DVec3, lambda_nm: Option<f64>) -> DirectionSampler<'_> {
+        let components = match brdf.components(wi, lambda_nm) {
+            Components::Shared(shared) => Components::Local(shared.iter().cloned().collect()),
+            local => local,
+        };
         DirectionSampler {
             brdf,
             wi,
-            components: Components::Local(brdf.build_components(wi, lambda_nm)),
+            components,
         }
     }
 
