@@ -367,36 +367,7 @@ impl PeriodicSurface {
         if lo > hi {
             return 0.0;
         }
-        let beta = k_per_um * w;
-        let ku = k_per_um * u;
-        let g = 2.0 * PI / self.period_um;
-        let mut sum = 0.0;
-        match &self.model {
-            Model::Rect {
-                height_um,
-                fill,
-                sinc2,
-            } => {
-                let s2 = sin_squared(0.5 * beta * height_um);
-                for n in lo..=hi {
-                    let d = l * (ku - g * n as f64);
-                    let e = d * d + e_v;
-                    if e < EXP_UNDERFLOW {
-                        sum += rect_power(n, s2, *fill, sinc2) * fast_exp(-e);
-                    }
-                }
-            }
-            Model::Table(table) => {
-                for n in lo..=hi {
-                    let d = l * (ku - g * n as f64);
-                    let e = d * d + e_v;
-                    if e < EXP_UNDERFLOW {
-                        let p = self.table_power(table, n, beta);
-                        sum += p * fast_exp(-e);
-                    }
-                }
-            }
-        }
+        let sum = self.order_sum(k_per_um, u, v, w, lo..=hi);
         let prefactor = (k_per_um * l / w).powi(2) / PI;
         let k = prefactor * sum;
         if k.is_finite() && k > 0.0 {
@@ -601,6 +572,27 @@ impl PeriodicSurface {
         out
     }
 
+    /// Sum over `orders` of |c_n(k w)|^2 exp(-E_n(k)), E_n = l^2 [(k u - 2 pi
+    /// n / Lam)^2 + k^2 v^2], terms that underflow left out: the spectral
+    /// kernel's sum, and the broad-peak rule's per node where its vectorised
+    /// loop does not apply.
+    fn order_sum(&self, k: f64, u: f64, v: f64, w: f64, orders: impl Iterator<Item = i64>) -> f64 {
+        let l = self.coherence_um;
+        let g = 2.0 * PI / self.period_um;
+        let beta = k * w;
+        let s2 = self.rect_s2(beta);
+        let e_v = (l * k * v).powi(2);
+        let mut sum = 0.0;
+        for n in orders {
+            let d = l * (k * u - g * n as f64);
+            let e = d * d + e_v;
+            if e < EXP_UNDERFLOW {
+                sum += self.power_fast(n, beta, s2) * fast_exp(-e);
+            }
+        }
+        sum
+    }
+
     /// Per node nu of the broad-peak rule, sum over `orders` (None: every
     /// order the spectral kernel would take at that node) of |c_n|^2
     /// exp(-E_n(nu)). For rectangular profiles, whose |c_n|^2 is linear in
@@ -653,26 +645,16 @@ impl PeriodicSurface {
         }
         for (sum, &nu) in sums.iter_mut().zip(nu_per_um) {
             let k = 2.0 * PI * nu;
-            let beta = k * w;
-            let s2 = self.rect_s2(beta);
-            let e_v = (l * k * v).powi(2);
-            let mut add = |n: i64| {
-                let d = l * (k * u - g * n as f64);
-                let e = d * d + e_v;
-                if e < EXP_UNDERFLOW {
-                    *sum += self.power_fast(n, beta, s2) * fast_exp(-e);
-                }
-            };
-            match orders {
-                Some(orders) => orders.iter().for_each(|&n| add(n)),
+            *sum = match orders {
+                Some(orders) => self.order_sum(k, u, v, w, orders.iter().copied()),
                 // Pathological: more broad orders than slots; take every
                 // order the spectral kernel would at this node (the peak
                 // width does not depend on n, so none of them is narrow).
                 None => {
                     let (lo, hi) = self.orders_near(k, u);
-                    (lo..=hi).for_each(add);
+                    self.order_sum(k, u, v, w, lo..=hi)
                 }
-            }
+            };
         }
         sums
     }
