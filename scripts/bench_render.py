@@ -127,13 +127,13 @@ def main():
     ap.add_argument('--child', action='store_true', help=argparse.SUPPRESS)
     args = ap.parse_args()
 
-    if args.child or args.processes <= 1:
-        rows = [r + (r[3], r[3]) for r in run_one(args)]
-        if args.child:
-            print(JSON_TAG + json.dumps([r[:4] for r in rows]), flush=True)
-            return
-    else:
+    if args.child:
+        print(JSON_TAG + json.dumps(run_one(args)), flush=True)
+        return
+    if args.processes > 1:
         rows = run_processes(args)
+    else:  # one process: its ratio is the median and the whole range
+        rows = [r + (r[3], r[3]) for r in run_one(args)]
     print('[bench_render] median over %d process(es) (range):' % max(args.processes, 1))
     for r in rows:
         print('[bench_render] %-16s %-30s %7.3f s  %5.2fx  (%.2f-%.2fx)' % r, flush=True)
