@@ -123,6 +123,12 @@ void stam_brdf_eval_pdf_sample_vertex(const StamBrdf *b, size_t n, const float *
 #define STAM_FLAG_SPECTRALLY_VARYING 4u
 uint32_t stam_brdf_flags(const StamBrdf *b);
 
+/* Luminance weights of linear sRGB (the Y row of sRGB -> XYZ): the RGB
+ * outputs are gamut-mapped at constant luminance with these weights. */
+#define STAM_SRGB_LUMINANCE_R 0.2126
+#define STAM_SRGB_LUMINANCE_G 0.7152
+#define STAM_SRGB_LUMINANCE_B 0.0722
+
 /* Bytes of memory the material holds (tables included; a Gaussian surface's
    RGB table once the first RGB evaluation has built it). */
 size_t stam_brdf_memory_bytes(const StamBrdf *b);
