@@ -5,8 +5,8 @@
 //! into C. On a caught panic, outputs are zeroed (and construction reports
 //! the panic message).
 
-use crate::brdf::Brdf;
-use crate::vertex::Channels;
+use crate::material::Brdf;
+use crate::material::Channels;
 use glam::DVec3;
 use std::ffi::{c_char, CStr};
 use std::panic::{catch_unwind, AssertUnwindSafe};

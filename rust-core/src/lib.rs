@@ -10,20 +10,19 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod benchmark;
-pub mod brdf;
 pub mod error;
 pub mod ffi;
-pub mod fractal;
-pub mod fresnel;
-pub mod gaussian;
-pub mod gaussian_rgb;
-pub mod geometry;
-pub mod params;
-pub mod periodic;
+mod json;
+pub mod material;
+pub mod models;
+pub mod optics;
 pub mod sampling;
 pub mod special;
 pub mod spectrum;
-pub mod vertex;
+#[cfg(test)]
+mod testing;
 
-pub use brdf::Brdf;
 pub use error::StamError;
+pub use material::{params, Brdf};
+pub use models::{fractal, gaussian, periodic};
+pub use optics::{fresnel, geometry};

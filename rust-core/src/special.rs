@@ -159,6 +159,16 @@ pub fn ln_factorial(m: u32) -> f64 {
     }
 }
 
+/// Final guard of every output: NaN or negative -> 0, +inf -> f64::MAX.
+#[inline]
+pub fn finite_non_negative(x: f64) -> f64 {
+    if x > 0.0 {
+        x.min(f64::MAX)
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

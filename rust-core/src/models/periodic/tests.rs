@@ -835,3 +835,77 @@ fn broad_sums_match_the_plain_sum() {
     // fast_exp's 2e-10 and sin^2's 1e-14; terms below e^-700 dropped.
     assert!(worst < 1e-9, "worst relative difference {worst}");
 }
+
+/// The broad-peak rule's reflectance from the node table equals the
+/// metal's reflectance at those wavelengths (the table has exact rows
+/// there; the grid interpolates between 1 nm rows): RGB of compact discs
+/// of two metals, through both, within 1e-4 of the largest channel.
+#[test]
+fn broad_rule_node_reflectance_matches_grid() {
+    for metal in ["aluminium", "gold"] {
+        let brdf = crate::material::Brdf::from_json(&format!(
+            r#"{{"surface":"cd","coherence_um":3.75,"fresnel":"{metal}"}}"#
+        ))
+        .unwrap();
+        let crate::models::Surface::Periodic(model) = brdf.surface() else {
+            panic!("periodic");
+        };
+        assert!(model.broad_reflectance.is_some());
+        let mut worst: f64 = 0.0;
+        for (wi, wo) in crate::testing::directions() {
+            let Some(geom) = PairGeometry::new(wi, wo) else {
+                continue;
+            };
+            let with_table = model.reflectance_rgb_with(brdf.fresnel(), &geom, true);
+            let plain = model
+                .surface
+                .kernel_rgb(&geom, &|l| brdf.fresnel().reflectance(geom.cos_half, l));
+            let m = plain.iter().fold(0.0f64, |a, c| a.max(c.abs()));
+            if m > 0.0 {
+                for c in 0..3 {
+                    worst = worst.max((with_table[c] - plain[c]).abs() / m);
+                }
+            }
+        }
+        println!("{metal}: node table against the grid, worst {worst:.1e} of the largest channel");
+        assert!(worst < 1e-4, "{metal}: {worst}");
+    }
+}
+
+/// A grating table with every cell built stays within its budget, for
+/// the compact disc and for a grating of a thousand orders.
+#[test]
+fn grating_table_stays_within_budget() {
+    for json in [
+        r#"{"surface":"cd"}"#,
+        r#"{"surface":"periodic","period_um":100,"coherence_um":200,"profile":"sine","height_um":5}"#,
+    ] {
+        let brdf = crate::material::Brdf::from_json(json).unwrap();
+        let crate::models::Surface::Periodic(model) = brdf.surface() else {
+            panic!("periodic");
+        };
+        let steps = 120;
+        for a in 0..steps {
+            for b in 0..steps {
+                let x = -1.0 + 2.0 * (a as f64 + 0.5) / steps as f64;
+                let y = -1.0 + 2.0 * (b as f64 + 0.5) / steps as f64;
+                if x * x + y * y < 0.999 {
+                    let wi = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+                    let _ = brdf.sampler(wi, None);
+                }
+            }
+        }
+        let table = model.grating_table().unwrap();
+        let built = table.cells.iter().filter(|c| c.get().is_some()).count();
+        let bytes = table.memory_bytes();
+        println!(
+            "{json}: {} cells per axis, {built} built, {bytes} bytes",
+            table.cells_per_axis
+        );
+        assert!(built > table.cells.len() / 2, "{built}");
+        assert!(
+            bytes <= sampling::GRATING_TABLE_BYTES + (64 << 10),
+            "{bytes}"
+        );
+    }
+}

@@ -48,20 +48,120 @@
 // the same way as an out-of-range value.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use crate::geometry::PairGeometry;
+mod orders;
+pub mod params;
+mod sampling;
+#[cfg(test)]
+mod tests;
+
+pub use params::PeriodicParams;
+pub use sampling::Lobe;
+
+use crate::error::StamError;
+use crate::models::{Shading, SurfaceModel, FLAG_ANISOTROPIC, FLAG_SPECTRALLY_VARYING};
+use crate::optics::fresnel::{Fresnel, NodeReflectance};
+use crate::optics::geometry::PairGeometry;
+use crate::sampling::{Component, Components};
 use crate::special::{fast_exp, fast_exp_vectorisable, sin_squared};
 use num_complex::Complex64;
+use orders::{bessel_j_row, dft_coefficient, sine_table, tabulated_table};
 use std::f64::consts::PI;
+use std::sync::OnceLock;
 
-#[cfg(test)]
-#[path = "periodic_tests.rs"]
-mod tests;
+/// The periodic model of a material: the surface and its tables.
+pub struct Periodic {
+    surface: PeriodicSurface,
+    /// With a metal's Fresnel: its reflectance at the wavelengths of the
+    /// RGB rule for broad peaks (9 kB).
+    broad_reflectance: Option<NodeReflectance>,
+    /// The sampling strategy's order weights over the incident direction,
+    /// made on the first sample.
+    grating: OnceLock<Option<sampling::GratingTable>>,
+}
+
+impl Periodic {
+    pub fn new(p: &PeriodicParams, fresnel: &Fresnel) -> Result<Periodic, StamError> {
+        let surface = PeriodicSurface::new(p.period_um, p.coherence_um, p.profile.clone())
+            .map_err(StamError::new)?;
+        Ok(Periodic {
+            surface,
+            broad_reflectance: NodeReflectance::new(
+                fresnel,
+                PeriodicSurface::broad_rule_wavelengths(),
+            ),
+            grating: OnceLock::new(),
+        })
+    }
+
+    pub fn surface(&self) -> &PeriodicSurface {
+        &self.surface
+    }
+
+    /// RGB of F^2 K with the Fresnel term at the pair's cosine, its
+    /// broad-rule nodes from the node table where the material has one.
+    pub(crate) fn reflectance_rgb_with(
+        &self,
+        fresnel: &Fresnel,
+        geom: &PairGeometry,
+        node_table: bool,
+    ) -> [f64; 3] {
+        let fresnel = fresnel.at_cos(geom.cos_half);
+        let reflectance = |lambda_nm: f64| fresnel.reflectance(lambda_nm);
+        let nodes = PeriodicSurface::broad_rule_wavelengths();
+        let table = self.broad_reflectance.as_ref().filter(|_| node_table);
+        let at_node = |j: usize| fresnel.at_node(table, j, nodes[j]);
+        self.surface.kernel_rgb_with(geom, &reflectance, &at_node)
+    }
+}
+
+impl SurfaceModel for Periodic {
+    type Lobe = Lobe;
+
+    fn flags(&self) -> u32 {
+        FLAG_ANISOTROPIC | FLAG_SPECTRALLY_VARYING
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.surface.memory_bytes()
+            + self
+                .broad_reflectance
+                .as_ref()
+                .map_or(0, |t| t.memory_bytes())
+            + self
+                .grating
+                .get()
+                .and_then(|t| t.as_ref())
+                .map_or(0, |t| t.memory_bytes())
+    }
+
+    #[inline]
+    fn kernel(&self, k_per_um: f64, geom: &PairGeometry) -> f64 {
+        self.surface.kernel(k_per_um, geom)
+    }
+
+    fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
+        self.reflectance_rgb_with(shading.fresnel, geom, true)
+    }
+
+    fn spectral_component(
+        &self,
+        shading: &Shading,
+        wi: glam::DVec3,
+        lambda_nm: f64,
+    ) -> Component<Lobe> {
+        self.component(shading, wi, lambda_nm)
+    }
+
+    fn rgb_components<'a>(&'a self, shading: &Shading, wi: glam::DVec3) -> Components<'a, Lobe> {
+        self.rgb_strategy(shading, wi)
+    }
+}
 
 /// The spectrum module the RGB path integrates against.
 use crate::spectrum;
 
 /// Shortest wavelength the tables cover (the visible band's lower end), um.
-const LAMBDA_MIN_UM: f64 = 0.36;
+const LAMBDA_MIN_UM: f64 = spectrum::LAMBDA_MIN_NM / 1000.0;
 /// Largest wavenumber covered by the tables, 1/um (2 pi / 0.36 um).
 const K_MAX: f64 = 2.0 * PI / LAMBDA_MIN_UM;
 /// The tables cover beta = k w in [-BETA_MAX, 0] (w >= -2).
@@ -738,237 +838,4 @@ fn rect_power(n: i64, s2: f64, fill: f64, sinc2: &[f64]) -> f64 {
         None => sinc(n as f64 * fill).powi(2),
     };
     4.0 * s2 * fill * fill * sc2
-}
-
-/// J_0(x) ..= J_{n_max}(x) for x >= 0 by Miller's backward recurrence,
-/// normalised with J_0 + 2 sum_k J_2k = 1. Accurate to ~1e-15 absolute for
-/// x up to a few hundred and any order.
-fn bessel_j_row(x: f64, n_max: usize) -> Vec<f64> {
-    let mut out = vec![0.0; n_max + 1];
-    if x == 0.0 {
-        out[0] = 1.0;
-        return out;
-    }
-    let top = (n_max as f64).max(x);
-    let mut m = (top + 30.0 + 2.0 * (40.0 * top).sqrt()) as usize;
-    m += m % 2;
-    let mut j_next = 0.0; // J_{k+1}
-    let mut j_k = 1e-30; // J_k for k = m
-    let mut sum = 0.0; // J_0 + 2 sum J_2k (unnormalised)
-    let mut k = m;
-    loop {
-        if k <= n_max {
-            out[k] = j_k;
-        }
-        if k & 1 == 0 {
-            sum += if k == 0 { j_k } else { 2.0 * j_k };
-        }
-        if k == 0 {
-            break;
-        }
-        let j_prev = 2.0 * k as f64 / x * j_k - j_next;
-        j_next = j_k;
-        j_k = j_prev;
-        k -= 1;
-        if j_k.abs() > 1e250 {
-            let r = 1e-250;
-            j_k *= r;
-            j_next *= r;
-            sum *= r;
-            for o in out.iter_mut().skip(k + 1) {
-                *o *= r;
-            }
-        }
-    }
-    for o in out.iter_mut() {
-        *o /= sum;
-    }
-    out
-}
-
-/// Bessel table for the sine profile: c_n ~ J_n(-beta b / 2) (phase dropped).
-fn sine_table(height_um: f64, n_phys: i64) -> Result<OrderTable, String> {
-    let half = 0.5 * height_um;
-    let n_beta = beta_samples(half);
-    let step = BETA_MAX / (n_beta - 1) as f64;
-    let x_max = BETA_MAX * half;
-    // J_n(x)^2 < 1e-12 for every x <= x_max beyond roughly x_max + 8 x^(1/3) + 20.
-    let n_hi = n_phys
-        .min((x_max + 8.0 * x_max.cbrt() + 25.0) as i64)
-        .max(0);
-    let orders = (n_hi + 1) as usize;
-    let bytes = orders * n_beta * std::mem::size_of::<[Complex64; 3]>();
-    if bytes > MAX_TABLE_BYTES {
-        return Err(format!(
-            "height_um ({height_um}) with period_um needs a {bytes}-byte Bessel table (limit {MAX_TABLE_BYTES}); reduce height_um"
-        ));
-    }
-    let mut data = Vec::with_capacity(orders * n_beta);
-    let mut max_power = vec![0.0f64; orders];
-    let row_len = orders + 2;
-    for j in 0..n_beta {
-        let beta = -BETA_MAX + j as f64 * step;
-        let x = (-beta * half).max(0.0);
-        let row = bessel_j_row(x, row_len);
-        // J_{-m} = (-1)^m J_m
-        let jn = |m: i64| -> f64 {
-            let v = row[m.unsigned_abs() as usize];
-            if m < 0 && m % 2 != 0 {
-                -v
-            } else {
-                v
-            }
-        };
-        for n in 0..=n_hi {
-            let val = jn(n);
-            let d1 = 0.5 * (jn(n - 1) - jn(n + 1));
-            let d2 = 0.25 * (jn(n - 2) - 2.0 * val + jn(n + 2));
-            // d/dbeta J_n(-beta half) = -half J_n', d2 = half^2 J_n''
-            data.push([
-                Complex64::new(val, 0.0),
-                Complex64::new(-half * d1, 0.0),
-                Complex64::new(half * half * d2, 0.0),
-            ]);
-            max_power[n as usize] = max_power[n as usize].max(val * val);
-        }
-    }
-    // Trim orders that never matter.
-    let keep = max_power
-        .iter()
-        .rposition(|&p| p > ORDER_POWER_TOL)
-        .unwrap_or(0);
-    let table = OrderTable {
-        step,
-        n_beta,
-        n_lo: 0,
-        n_hi,
-        symmetric: true,
-        data,
-    };
-    Ok(trim_table(table, 0, keep as i64))
-}
-
-/// Keeps only the orders n_lo..=n_hi of a table.
-fn trim_table(table: OrderTable, n_lo: i64, n_hi: i64) -> OrderTable {
-    if n_lo == table.n_lo && n_hi == table.n_hi {
-        return table;
-    }
-    let stride = table.orders();
-    let first = (n_lo - table.n_lo) as usize;
-    let width = (n_hi - n_lo + 1) as usize;
-    let mut data = Vec::with_capacity(width * table.n_beta);
-    for j in 0..table.n_beta {
-        data.extend_from_slice(&table.data[j * stride + first..j * stride + first + width]);
-    }
-    OrderTable {
-        n_lo,
-        n_hi,
-        data,
-        ..table
-    }
-}
-
-/// c_n of sampled heights (samples model, see the module doc), direct O(N).
-fn dft_coefficient(heights: &[f64], n: i64, beta: f64) -> Complex64 {
-    let len = heights.len() as i64;
-    let half = len / 2;
-    if n.abs() > half {
-        return Complex64::new(0.0, 0.0);
-    }
-    let mut acc = Complex64::new(0.0, 0.0);
-    for (j, h) in heights.iter().enumerate() {
-        let ph = beta * h - 2.0 * PI * ((n * j as i64).rem_euclid(len)) as f64 / len as f64;
-        acc += Complex64::from_polar(1.0, ph);
-    }
-    acc /= len as f64;
-    if len & 1 == 0 && n.abs() == half {
-        acc /= std::f64::consts::SQRT_2;
-    }
-    acc
-}
-
-/// FFT table for a tabulated profile.
-fn tabulated_table(heights: &[f64], period_um: f64, n_phys: i64) -> Result<OrderTable, String> {
-    let len = heights.len();
-    let (lo, hi) = heights
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
-            (a.min(h), b.max(h))
-        });
-    let mid = 0.5 * (lo + hi);
-    let half = 0.5 * (hi - lo);
-    let centred: Vec<f64> = heights.iter().map(|h| h - mid).collect();
-    let n_beta = beta_samples(half);
-    let step = BETA_MAX / (n_beta - 1) as f64;
-    let nyq = (len / 2) as i64;
-    let n_lim = n_phys.min(nyq);
-    let mut planner = rustfft::FftPlanner::<f64>::new();
-    let fft = planner.plan_fft_forward(len);
-    let index = |n: i64| -> usize { n.rem_euclid(len as i64) as usize };
-    let nyq_scale = |n: i64| -> f64 {
-        if len & 1 == 0 && n.abs() == nyq {
-            std::f64::consts::FRAC_1_SQRT_2
-        } else {
-            1.0
-        }
-    };
-    let inv = 1.0 / len as f64;
-    // Pass 1: the largest |c_n|^2 over the grid, to choose the orders.
-    let mut max_power = vec![0.0f64; (2 * n_lim + 1) as usize];
-    let mut buf = vec![Complex64::new(0.0, 0.0); len];
-    for j in 0..n_beta {
-        let beta = -BETA_MAX + j as f64 * step;
-        for (b, h) in buf.iter_mut().zip(&centred) {
-            *b = Complex64::from_polar(inv, beta * h);
-        }
-        fft.process(&mut buf);
-        for n in -n_lim..=n_lim {
-            let p = buf[index(n)].norm_sqr() * nyq_scale(n).powi(2);
-            let slot = &mut max_power[(n + n_lim) as usize];
-            *slot = slot.max(p);
-        }
-    }
-    let first = max_power.iter().position(|&p| p > ORDER_POWER_TOL);
-    let last = max_power.iter().rposition(|&p| p > ORDER_POWER_TOL);
-    let (n_lo, n_hi) = match (first, last) {
-        (Some(a), Some(b)) => (a as i64 - n_lim, b as i64 - n_lim),
-        _ => (0, 0),
-    };
-    let orders = (n_hi - n_lo + 1) as usize;
-    let bytes = orders * n_beta * std::mem::size_of::<[Complex64; 3]>();
-    if bytes > MAX_TABLE_BYTES {
-        return Err(format!(
-            "heights_um (range {:.4} um) with period_um ({period_um}) needs {orders} orders x {n_beta} beta samples = {bytes} bytes of |c_n|^2 table (limit {MAX_TABLE_BYTES}); reduce the height range of heights_um or period_um",
-            hi - lo
-        ));
-    }
-    // Pass 2: value and beta derivatives (FFTs of e, i h e, -h^2 e).
-    let mut data = Vec::with_capacity(orders * n_beta);
-    let mut b1 = vec![Complex64::new(0.0, 0.0); len];
-    let mut b2 = vec![Complex64::new(0.0, 0.0); len];
-    for j in 0..n_beta {
-        let beta = -BETA_MAX + j as f64 * step;
-        for (i, h) in centred.iter().enumerate() {
-            let e = Complex64::from_polar(inv, beta * h);
-            buf[i] = e;
-            b1[i] = e * Complex64::new(0.0, *h);
-            b2[i] = e * (-h * h);
-        }
-        fft.process(&mut buf);
-        fft.process(&mut b1);
-        fft.process(&mut b2);
-        for n in n_lo..=n_hi {
-            let sc = nyq_scale(n);
-            let i = index(n);
-            data.push([buf[i] * sc, b1[i] * sc, b2[i] * sc]);
-        }
-    }
-    Ok(OrderTable {
-        step,
-        n_beta,
-        n_lo,
-        n_hi,
-        symmetric: false,
-        data,
-    })
 }

@@ -1,38 +1,7 @@
-//! Gaussian random surfaces: isotropic (smooth metals) and anisotropic
-//! (brushed metal). See docs/physics.md, "Gaussian random surfaces".
-//!
-//! With g = (k sigma w)^2 and x = k^2 (Tx^2 u^2 + Ty^2 v^2) / 4, the diffuse
-//! kernel (the BRDF without F^2 and G) is
-//!
-//!   K = k^2 Tx Ty / (4 pi w^2) * S(g, x),
-//!   S(g, x) = sum_{m >= 1} e^-g g^m / m! * exp(-x / m) / m,
-//!
-//! i.e. the expectation of phi(m) = exp(-x/m)/m over a Poisson(g) count m
-//! (phi(0) = 0). The coherent lobe carries e^-g of the energy and is kept
-//! out of K. Five ways to evaluate S, tried in this order per call:
-//! - a universal table of ln S over (ln g, sqrt(x / (1 + g))), bicubic
-//!   B-spline (1e-4 <= g < 1e4, rho < 60);
-//! - asymptotic (g >= `asymptotic_min_g`, near the specular peak): the
-//!   Poisson expectation by Gauss-Hermite quadrature with Edgeworth
-//!   corrections up to O(g^-3/2), 8 nodes whatever g is;
-//! - windowed sum (far tails beyond the table, g <= 40): the terms within 6
-//!   standard deviations of the largest, summed in one vectorised pass;
-//! - saddle-point quadrature: the terms as a smooth bell in m integrated by
-//!   10-node Gauss-Hermite around its mode (large g off-specular, far tails);
-//! - exact: the terms summed outward from the largest one by their ratios,
-//!   stopping when a geometric bound on the tails falls below `tolerance`
-//!   times the partial sum. Used for `series_tolerance` below 1e-5 (which
-//!   also skips the table, windowed sum and saddle rule) and wherever the
-//!   faster forms do not apply.
-//!
-//! Each form's accuracy against a plain log-space summation is measured in
-//! the tests (all below 4e-5 relative).
+//! The series S(g, x) of Gaussian surfaces and its five evaluations (see the
+//! module documentation of `models::gaussian`).
 
-use crate::geometry::PairGeometry;
 use crate::special::{fast_exp, fast_exp_vectorisable, ln_factorial, ln_gamma};
-use std::f64::consts::PI;
-
-/// Default relative truncation tolerance of the exact series.
 pub const DEFAULT_SERIES_TOLERANCE: f64 = 1e-5;
 /// Default smallest g served by the asymptotic rule; below it the exact sum
 /// needs at most ~2 * 4.5 * sqrt(g) terms.
@@ -69,107 +38,6 @@ impl SeriesSettings {
 /// error is below 4e-5 relative, measured in the tests); a tighter setting
 /// sums the series exactly.
 pub const TABLE_MIN_TOLERANCE: f64 = 1e-5;
-
-/// A Gaussian-correlated height field: C(x, y) = sigma^2 exp(-x^2/Tx^2 - y^2/Ty^2).
-#[derive(Clone, Debug, PartialEq)]
-pub struct GaussianSurface {
-    pub sigma_um: f64,
-    pub corr_x_um: f64,
-    pub corr_y_um: f64,
-    /// Tx == Ty: the plan skips the per-axis weighting.
-    pub isotropic: bool,
-    pub series: SeriesSettings,
-}
-
-impl GaussianSurface {
-    pub fn isotropic(sigma_um: f64, corr_um: f64) -> GaussianSurface {
-        GaussianSurface {
-            sigma_um,
-            corr_x_um: corr_um,
-            corr_y_um: corr_um,
-            isotropic: true,
-            series: SeriesSettings::default(),
-        }
-    }
-
-    pub fn anisotropic(sigma_um: f64, corr_x_um: f64, corr_y_um: f64) -> GaussianSurface {
-        GaussianSurface {
-            sigma_um,
-            corr_x_um,
-            corr_y_um,
-            isotropic: corr_x_um == corr_y_um,
-            series: SeriesSettings::default(),
-        }
-    }
-
-    /// Roughness exponent g = (k sigma w)^2.
-    #[inline]
-    pub fn roughness_exponent(&self, k_per_um: f64, w: f64) -> f64 {
-        let a = k_per_um * self.sigma_um * w;
-        a * a
-    }
-
-    /// x = k^2 (Tx^2 u^2 + Ty^2 v^2) / 4, the exponent of the lobes.
-    #[inline]
-    pub fn lobe_exponent(&self, k_per_um: f64, u: f64, v: f64) -> f64 {
-        let k2 = k_per_um * k_per_um;
-        if self.isotropic {
-            0.25 * k2 * self.corr_x_um * self.corr_x_um * (u * u + v * v)
-        } else {
-            let tu = self.corr_x_um * u;
-            let tv = self.corr_y_um * v;
-            0.25 * k2 * (tu * tu + tv * tv)
-        }
-    }
-
-    /// Diffuse kernel K (1/sr before F^2 and G) at wavenumber k.
-    pub fn kernel(&self, k_per_um: f64, geom: &PairGeometry) -> f64 {
-        let g = self.roughness_exponent(k_per_um, geom.w);
-        let x = self.lobe_exponent(k_per_um, geom.u, geom.v);
-        let s = poisson_series(g, x, &self.series);
-        let prefactor =
-            k_per_um * k_per_um * self.corr_x_um * self.corr_y_um / (4.0 * PI * geom.w * geom.w);
-        prefactor * s
-    }
-
-    /// K at several wavenumbers (the RGB rule's nodes), sharing the
-    /// geometry work: g and x scale as k^2, so ln g and sqrt(x) (the table's
-    /// coordinates) are offsets and scalings of per-pair values.
-    pub fn kernel_at_wavenumbers(
-        &self,
-        k_per_um: &[f64],
-        ln_k_per_um: &[f64],
-        geom: &PairGeometry,
-        out: &mut [f64],
-    ) {
-        let g0 = self.roughness_exponent(1.0, geom.w);
-        let x0 = self.lobe_exponent(1.0, geom.u, geom.v);
-        let ln_g0 = g0.ln();
-        let root_x0 = x0.sqrt();
-        let prefactor0 = self.corr_x_um * self.corr_y_um / (4.0 * PI * geom.w * geom.w);
-        for ((o, &k), &ln_k) in out.iter_mut().zip(k_per_um).zip(ln_k_per_um) {
-            let k2 = k * k;
-            let g = g0 * k2;
-            let x = x0 * k2;
-            let s = if self.series.use_table {
-                match series_table().lookup_parts(g, ln_g0 + 2.0 * ln_k, root_x0 * k) {
-                    Some(s) => s,
-                    None => poisson_series(g, x, &self.series),
-                }
-            } else {
-                poisson_series(g, x, &self.series)
-            };
-            *o = prefactor0 * k2 * s;
-        }
-    }
-
-    /// Fraction e^-g of the energy left in the mirror lobe at incidence
-    /// cosine cos_i (w = -2 cos_i there).
-    pub fn coherent_attenuation(&self, k_per_um: f64, cos_i: f64) -> f64 {
-        let g = self.roughness_exponent(k_per_um, 2.0 * cos_i);
-        (-g).exp()
-    }
-}
 
 /// S(g, x) = sum_{m >= 1} Poisson(m; g) exp(-x/m) / m, dispatching to the
 /// cheapest evaluation that meets the settings' accuracy.
@@ -216,7 +84,7 @@ pub fn poisson_series(g: f64, x: f64, settings: &SeriesSettings) -> f64 {
 /// instead of third-order accurate: ~1e-6 relative instead of ~1e-5 on this
 /// grid). Rows above g = 40 are filled by the saddle-point rule (the exact
 /// sum would take O(sqrt g) terms per node).
-struct SeriesTable {
+pub(super) struct SeriesTable {
     ln_g_min: f64,
     inv_d_ln_g: f64,
     n_g: usize,
@@ -423,7 +291,7 @@ pub(crate) fn ln_poisson_series_window(g: f64, ln_g: f64, x: f64, mode: &mut usi
     Some(peak - g + sum.ln())
 }
 
-fn series_table() -> &'static SeriesTable {
+pub(super) fn series_table() -> &'static SeriesTable {
     static TABLE: std::sync::OnceLock<SeriesTable> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
         let ln_g_min = TABLE_G_MIN.ln();
@@ -487,7 +355,7 @@ impl SeriesTable {
 
     /// The same from g, ln g and sqrt(x) when the caller has them.
     #[inline]
-    fn lookup_parts(&self, g: f64, ln_g: f64, root_x: f64) -> Option<f64> {
+    pub(super) fn lookup_parts(&self, g: f64, ln_g: f64, root_x: f64) -> Option<f64> {
         self.ln_lookup_parts(g, ln_g, root_x).map(fast_exp)
     }
 
@@ -828,8 +696,11 @@ pub fn poisson_series_reference(g: f64, x: f64) -> f64 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::GaussianSurface;
     use super::*;
+    use crate::optics::geometry::PairGeometry;
     use glam::DVec3;
+    use std::f64::consts::PI;
 
     fn rel_err(a: f64, b: f64) -> f64 {
         if a == b {

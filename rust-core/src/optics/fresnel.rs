@@ -4,7 +4,7 @@
 //! Three kinds: a constant reflectance, a constant complex index, or a
 //! metal's measured spectral index (tabulated, linear in wavelength).
 
-use crate::spectrum::metals::{MetalTable, METALS};
+use super::metals::{MetalTable, METALS};
 
 #[derive(Clone)]
 pub enum Fresnel {

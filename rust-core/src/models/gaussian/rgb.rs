@@ -29,11 +29,11 @@
 //! agrees with the per-node path to its own interpolation error (measured in
 //! the tests: 2.5e-5 relative at worst, wherever it serves).
 
-use crate::gaussian::{
-    bspline_weights, ln_poisson_series, ln_poisson_series_along_x, prefilter_2d, GaussianSurface,
-    SPLINE_MARGIN,
+use super::series::{
+    bspline_weights, ln_poisson_series, ln_poisson_series_along_x, prefilter_2d, SPLINE_MARGIN,
 };
-use crate::geometry::PairGeometry;
+use super::GaussianSurface;
+use crate::optics::geometry::PairGeometry;
 use std::f64::consts::PI;
 
 /// Spacing of the rows in ln g0.

@@ -10,9 +10,10 @@
 //! wavelengths have in common (the pair geometry, the normalised
 //! directions) instead of repeating it per wavelength and per query.
 
-use crate::brdf::Brdf;
-use crate::geometry::PairGeometry;
-use crate::sampling::{DirectionSampler, SampleResult};
+use super::Brdf;
+use crate::models::Strategy;
+use crate::optics::geometry::PairGeometry;
+use crate::sampling::SampleResult;
 use glam::DVec3;
 
 /// The channels of a path: RGB (3 values), or its wavelengths in nm.
@@ -38,7 +39,7 @@ impl Brdf {
     /// is one equally weighted component (or the RGB mixture), so the
     /// mixture is a single strategy whose first uniform picks the sampling
     /// wavelength.
-    pub fn vertex_strategy(&self, wi: DVec3, channels: Channels) -> DirectionSampler<'_> {
+    pub fn vertex_strategy(&self, wi: DVec3, channels: Channels) -> Strategy<'_> {
         match channels {
             Channels::Rgb => self.sampler(wi, None),
             Channels::Wavelengths(lambdas) => self.mixture_sampler(wi, lambdas),
@@ -54,7 +55,7 @@ impl Brdf {
                 let out = &mut f[..lambdas.len()];
                 match PairGeometry::new(wi, wo) {
                     Some(geom) => {
-                        let fresnel = self.fresnel.at_cos(geom.cos_half);
+                        let fresnel = self.fresnel_at(&geom);
                         for (o, &lambda) in out.iter_mut().zip(lambdas) {
                             *o = self.eval_spectral_with(&geom, lambda, &fresnel);
                         }
@@ -98,7 +99,7 @@ impl Brdf {
     /// 0.
     pub fn sample_with(
         &self,
-        strategy: &DirectionSampler,
+        strategy: &Strategy,
         wi: DVec3,
         channels: Channels,
         rnd: [f64; 3],

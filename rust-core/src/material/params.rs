@@ -1,0 +1,232 @@
+//! Material parameters from JSON, validated with messages that name the key
+//! and its accepted range: the material's own keys (surface, fresnel) here,
+//! each surface model's in its `params` module. The Mitsuba plugin passes
+//! the same names. Lengths are micrometres, wavelengths nanometres. See
+//! docs/parameters.md.
+
+use crate::error::StamError;
+use crate::json::{format_bound, type_name, Reader};
+pub use crate::models::fractal::params::DEFAULT_RGB_NODES as DEFAULT_RGB_NODES_FRACTAL;
+pub use crate::models::gaussian::params::DEFAULT_RGB_NODES;
+pub use crate::models::periodic::params::{
+    CD_BUMP_HEIGHT_UM, CD_BUMP_WIDTH_UM, CD_COHERENCE_UM, CD_PERIOD_UM,
+};
+pub use crate::models::SurfaceParams;
+use crate::optics::fresnel::{metal_by_name, metal_names, Fresnel};
+use serde_json::Value;
+
+/// Accepted ranges of the material's own keys.
+pub mod range {
+    pub const ETA: (f64, f64) = (1e-3, 100.0);
+    pub const K: (f64, f64) = (0.0, 100.0);
+}
+
+/// The keys the material reads whatever its surface.
+const MATERIAL_KEYS: [&str; 2] = ["surface", "fresnel"];
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaterialParams {
+    pub surface: SurfaceParams,
+    pub fresnel: Fresnel,
+}
+
+fn err(msg: String) -> StamError {
+    StamError::new(msg)
+}
+
+impl MaterialParams {
+    pub fn from_json(text: &str) -> Result<MaterialParams, StamError> {
+        let value: Value = serde_json::from_str(text)
+            .map_err(|e| err(format!("parameters are not valid JSON: {e}")))?;
+        let Value::Object(obj) = &value else {
+            return Err(err(format!(
+                "parameters must be a JSON object, got {}",
+                type_name(&value)
+            )));
+        };
+        let surface = SurfaceParams::parse(obj, &MATERIAL_KEYS)?;
+        let fresnel = parse_fresnel(obj.get("fresnel"))?;
+        Ok(MaterialParams { surface, fresnel })
+    }
+}
+
+fn parse_fresnel(value: Option<&Value>) -> Result<Fresnel, StamError> {
+    let names = metal_names().join(", ");
+    match value {
+        None => Ok(Fresnel::metal(
+            metal_by_name("aluminium").expect("aluminium table is built in"),
+        )),
+        Some(Value::Number(n)) => match n.as_f64() {
+            Some(r) if r > 0.0 && r <= 1.0 => Ok(Fresnel::Constant(r)),
+            _ => Err(err(format!(
+                "parameter 'fresnel' = {n} is out of range: a constant reflectance must be in (0, 1] (or a metal name: {names}; or {{\"eta\": n, \"k\": k}})"
+            ))),
+        },
+        Some(Value::String(s)) => metal_by_name(s).map(Fresnel::metal).ok_or_else(|| {
+            err(format!(
+                "unknown metal '{s}' for parameter 'fresnel' (accepted: {names}; or a reflectance in (0, 1]; or {{\"eta\": n, \"k\": k}})"
+            ))
+        }),
+        Some(Value::Object(obj)) => {
+            for key in obj.keys() {
+                if key != "eta" && key != "k" {
+                    return Err(err(format!(
+                        "unknown key '{key}' in parameter 'fresnel' (a complex index is {{\"eta\": n, \"k\": k}})"
+                    )));
+                }
+            }
+            let reader = Reader::new(obj, "fresnel", &[]);
+            let eta = reader
+                .ranged("eta", range::ETA, false, "")?
+                .ok_or_else(|| {
+                    err(format!(
+                        "missing key 'eta' in parameter 'fresnel' (accepted range [{}, {}])",
+                        format_bound(range::ETA.0),
+                        format_bound(range::ETA.1)
+                    ))
+                })?;
+            let k = reader.ranged("k", range::K, false, "")?.unwrap_or(0.0);
+            Ok(Fresnel::ComplexIndex { eta, k })
+        }
+        Some(other) => Err(err(format!(
+            "parameter 'fresnel' must be a reflectance in (0, 1], a metal name ({names}) or {{\"eta\": n, \"k\": k}}, got {}",
+            type_name(other)
+        ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::gaussian::GaussianParams;
+    use crate::models::periodic::{PeriodicParams, Profile};
+
+    fn message(json: &str) -> String {
+        MaterialParams::from_json(json).unwrap_err().message
+    }
+
+    #[test]
+    fn accepts_each_surface() {
+        let p = MaterialParams::from_json(r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2}"#)
+            .unwrap();
+        assert!(matches!(
+            p.surface,
+            SurfaceParams::Gaussian(GaussianParams {
+                anisotropic: false,
+                ..
+            })
+        ));
+        let p = MaterialParams::from_json(
+            r#"{"surface":"gaussian","sigma_um":0.1,"corr_x_um":2,"corr_y_um":20,"fresnel":0.9}"#,
+        )
+        .unwrap();
+        assert!(matches!(
+            p.surface,
+            SurfaceParams::Gaussian(GaussianParams {
+                anisotropic: true,
+                ..
+            })
+        ));
+        assert_eq!(p.fresnel, Fresnel::Constant(0.9));
+        MaterialParams::from_json(r#"{"surface":"fractal","hurst":0.5,"sigma_um":0.1,"lag_um":1}"#)
+            .unwrap();
+        let cd = MaterialParams::from_json(r#"{"surface":"cd"}"#).unwrap();
+        assert_eq!(
+            cd.surface,
+            SurfaceParams::Periodic(PeriodicParams {
+                period_um: CD_PERIOD_UM,
+                coherence_um: CD_COHERENCE_UM,
+                profile: Profile::Rect {
+                    height_um: CD_BUMP_HEIGHT_UM,
+                    width_um: CD_BUMP_WIDTH_UM
+                }
+            })
+        );
+        let cd = MaterialParams::from_json(
+            r#"{"surface":"cd","coherence_um":10,"fresnel":{"eta":1.5}}"#,
+        )
+        .unwrap();
+        assert!(
+            matches!(cd.surface, SurfaceParams::Periodic(PeriodicParams { coherence_um, .. }) if coherence_um == 10.0)
+        );
+        MaterialParams::from_json(
+            r#"{"surface":"periodic","period_um":1,"coherence_um":20,"profile":{"heights_um":[0,0.1,0.2,0.1]},"fresnel":"gold"}"#,
+        )
+        .unwrap();
+        MaterialParams::from_json(
+            r#"{"surface":"periodic","period_um":1,"coherence_um":20,"profile":"sine","height_um":0.2}"#,
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn refusals_name_the_key_and_range() {
+        let m = message(r#"{"surface":"gaussian","sigma_um":-1,"corr_um":2}"#);
+        assert!(
+            m.contains("'sigma_um'") && m.contains("[0.000001, 100]"),
+            "{m}"
+        );
+        let m = message(r#"{"surface":"gaussian","sigma_um":0.1}"#);
+        assert!(m.contains("'corr_um'"), "{m}");
+        let m = message(r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2,"colour":1}"#);
+        assert!(m.contains("unknown parameter 'colour'"), "{m}");
+        let m = message(r#"{"surface":"fractal","hurst":0,"sigma_um":0.1,"lag_um":1}"#);
+        assert!(m.contains("'hurst'") && m.contains("[0.001, 1]"), "{m}");
+        let m = message(r#"{"surface":"fractal","hurst":1e-4,"sigma_um":0.1,"lag_um":1}"#);
+        assert!(m.contains("'hurst'") && m.contains("[0.001, 1]"), "{m}");
+        let m = message(r#"{"surface":"cd","coherence_um":1}"#);
+        assert!(m.contains("'coherence_um'") && m.contains("3.75"), "{m}");
+        let m = message(
+            r#"{"surface":"periodic","period_um":1,"coherence_um":20,"profile":"rect","height_um":0.1}"#,
+        );
+        assert!(m.contains("'width_um'"), "{m}");
+        let m = message(r#"{"surface":"cd","width_um":3}"#);
+        assert!(m.contains("'width_um'") && m.contains("2.5"), "{m}");
+        let m = message(r#"{"surface":"cd","fresnel":"unobtainium"}"#);
+        assert!(m.contains("'fresnel'") && m.contains("aluminium"), "{m}");
+        let m = message(r#"{"surface":"cd","fresnel":1.5}"#);
+        assert!(m.contains("'fresnel'") && m.contains("(0, 1]"), "{m}");
+        let m = message(r#"{"surface":"glass"}"#);
+        assert!(m.contains("'surface'"), "{m}");
+        let m = message(r#"{"sigma_um":1}"#);
+        assert!(m.contains("missing parameter 'surface'"), "{m}");
+        let m = message("not json");
+        assert!(m.contains("JSON"), "{m}");
+        let m = message(r#"{"surface":"cd","rgb_nodes":2.5}"#);
+        assert!(m.contains("'rgb_nodes'"), "{m}");
+        let m = message(
+            r#"{"surface":"periodic","period_um":1,"coherence_um":20,"profile":{"heights_um":[0]}}"#,
+        );
+        assert!(m.contains("'profile.heights_um'"), "{m}");
+    }
+
+    /// Keys a surface does not read are refused by name, with the list of
+    /// what it accepts; computed bounds print as a person would write them.
+    #[test]
+    fn keys_a_surface_does_not_use_are_refused() {
+        let m = message(r#"{"surface":"cd","series_tolerance":1e-6}"#);
+        assert!(
+            m.contains("unknown parameter 'series_tolerance' for surface 'cd'"),
+            "{m}"
+        );
+        assert!(m.contains("surface, fresnel, period_um"), "{m}");
+        let m = message(r#"{"surface":"cd","rgb_nodes":16}"#);
+        assert!(m.contains("unknown parameter 'rgb_nodes'"), "{m}");
+        let m = message(
+            r#"{"surface":"fractal","hurst":0.5,"sigma_um":0.1,"lag_um":1,"series_tolerance":1e-6}"#,
+        );
+        assert!(m.contains("unknown parameter 'series_tolerance'"), "{m}");
+        MaterialParams::from_json(
+            r#"{"surface":"fractal","hurst":0.5,"sigma_um":0.1,"lag_um":1,"rgb_nodes":16}"#,
+        )
+        .unwrap();
+        MaterialParams::from_json(
+            r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2,"rgb_nodes":16,"series_tolerance":1e-6}"#,
+        )
+        .unwrap();
+        let m = message(
+            r#"{"surface":"periodic","period_um":1.2,"coherence_um":1,"profile":"sine","height_um":0.1}"#,
+        );
+        assert!(m.contains("[1.8, 10000]"), "{m}");
+    }
+}

@@ -1,0 +1,83 @@
+//! Parameters of a Gaussian surface (docs/parameters.md).
+
+use super::series::DEFAULT_SERIES_TOLERANCE;
+use crate::error::StamError;
+use crate::json::{format_bound, Reader};
+use crate::models::MAX_RGB_NODES;
+
+/// Accepted ranges, shared by the validator, the docs and the stress tests.
+pub mod range {
+    pub const SIGMA_UM: (f64, f64) = (1e-6, 100.0);
+    pub const CORR_UM: (f64, f64) = (1e-3, 1e5);
+    pub const SERIES_TOLERANCE: (f64, f64) = (1e-12, 0.1);
+    pub const RGB_NODES: (usize, usize) = (4, crate::models::MAX_RGB_NODES);
+}
+
+/// Default node count of the RGB rule (and of the coherent lobe's).
+pub const DEFAULT_RGB_NODES: usize = 12;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct GaussianParams {
+    pub sigma_um: f64,
+    pub corr_x_um: f64,
+    pub corr_y_um: f64,
+    pub anisotropic: bool,
+    /// Relative truncation tolerance of the exact series.
+    pub series_tolerance: f64,
+    /// Wavelength nodes of the RGB rule.
+    pub rgb_nodes: usize,
+}
+
+const _: () = assert!(range::RGB_NODES.1 <= MAX_RGB_NODES);
+
+impl GaussianParams {
+    pub fn parse(r: &Reader) -> Result<GaussianParams, StamError> {
+        r.check_keys(&[
+            "sigma_um",
+            "corr_um",
+            "corr_x_um",
+            "corr_y_um",
+            "series_tolerance",
+            "rgb_nodes",
+        ])?;
+        let sigma_um = r.required("sigma_um", range::SIGMA_UM, false, " um")?;
+        let corr = r.ranged("corr_um", range::CORR_UM, false, " um")?;
+        let corr_x = r.ranged("corr_x_um", range::CORR_UM, false, " um")?;
+        let corr_y = r.ranged("corr_y_um", range::CORR_UM, false, " um")?;
+        let (lo, hi) = (
+            format_bound(range::CORR_UM.0),
+            format_bound(range::CORR_UM.1),
+        );
+        let (corr_x_um, corr_y_um, anisotropic) = match (corr, corr_x, corr_y) {
+            (Some(t), None, None) => (t, t, false),
+            (None, Some(tx), Some(ty)) => (tx, ty, tx != ty),
+            (Some(_), _, _) => {
+                return Err(StamError::new(
+                    "give either 'corr_um' (isotropic) or 'corr_x_um' and 'corr_y_um' (anisotropic), not both"
+                        .to_string(),
+                ))
+            }
+            (None, Some(_), None) => return Err(StamError::new(format!(
+                "missing parameter 'corr_y_um' (anisotropic surfaces need both 'corr_x_um' and 'corr_y_um', each in [{lo}, {hi}] um)"
+            ))),
+            (None, None, Some(_)) => return Err(StamError::new(format!(
+                "missing parameter 'corr_x_um' (anisotropic surfaces need both 'corr_x_um' and 'corr_y_um', each in [{lo}, {hi}] um)"
+            ))),
+            (None, None, None) => return Err(StamError::new(format!(
+                "missing parameter 'corr_um' for surface 'gaussian' (accepted range [{lo}, {hi}] um; or 'corr_x_um' and 'corr_y_um' for an anisotropic surface)"
+            ))),
+        };
+        Ok(GaussianParams {
+            sigma_um,
+            corr_x_um,
+            corr_y_um,
+            anisotropic,
+            series_tolerance: r
+                .ranged("series_tolerance", range::SERIES_TOLERANCE, false, "")?
+                .unwrap_or(DEFAULT_SERIES_TOLERANCE),
+            rgb_nodes: r
+                .integer("rgb_nodes", range::RGB_NODES)?
+                .unwrap_or(DEFAULT_RGB_NODES),
+        })
+    }
+}

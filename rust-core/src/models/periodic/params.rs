@@ -1,0 +1,203 @@
+//! Parameters of a periodic surface and of the compact disc
+//! (docs/parameters.md).
+
+use super::Profile;
+use crate::error::StamError;
+use crate::json::{format_bound, type_name, Reader};
+use serde_json::Value;
+
+/// The compact disc of the paper (Stam's "Used physical dimensions").
+pub const CD_PERIOD_UM: f64 = 2.5;
+pub const CD_BUMP_HEIGHT_UM: f64 = 0.15;
+pub const CD_BUMP_WIDTH_UM: f64 = 0.5;
+/// Spatial coherence of ordinary illumination: about lambda / (angular size
+/// of the source); a 1 cm lamp at 1 m or the sun give ~50 um at 550 nm.
+pub const CD_COHERENCE_UM: f64 = 50.0;
+
+/// Accepted ranges, shared by the validator, the docs and the stress tests.
+pub mod range {
+    pub const PERIOD_UM: (f64, f64) = (0.05, 1000.0);
+    /// As a multiple of the period (lower end) and in um (upper end).
+    pub const COHERENCE_MIN_PERIODS: f64 = 1.5;
+    pub const COHERENCE_MAX_UM: f64 = 1e4;
+    pub const HEIGHT_UM: (f64, f64) = (0.0, 100.0);
+    pub const HEIGHTS_LEN: (usize, usize) = (2, 65536);
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeriodicParams {
+    pub period_um: f64,
+    pub coherence_um: f64,
+    pub profile: Profile,
+}
+
+fn err(msg: String) -> StamError {
+    StamError::new(msg)
+}
+
+impl PeriodicParams {
+    /// `compact_disc`: the surface 'cd', whose keys default to the paper's disc.
+    pub fn parse(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, StamError> {
+        parse_periodic(r, compact_disc)
+    }
+}
+
+fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, StamError> {
+    r.check_keys(&[
+        "period_um",
+        "coherence_um",
+        "profile",
+        "height_um",
+        "width_um",
+    ])?;
+    let defaults = |v: f64| if compact_disc { Some(v) } else { None };
+    let period_um = match r.ranged("period_um", range::PERIOD_UM, false, " um")? {
+        Some(p) => p,
+        None => defaults(CD_PERIOD_UM).ok_or_else(|| {
+            err(format!(
+                "missing parameter 'period_um' for surface 'periodic' (accepted range [{}, {}] um)",
+                format_bound(range::PERIOD_UM.0),
+                format_bound(range::PERIOD_UM.1)
+            ))
+        })?,
+    };
+    let coherence_lo = range::COHERENCE_MIN_PERIODS * period_um;
+    let coherence_range = (coherence_lo, range::COHERENCE_MAX_UM);
+    let coherence_um = match r.number("coherence_um")? {
+        Some(l) if l < coherence_lo || l > range::COHERENCE_MAX_UM => {
+            return Err(err(format!(
+                "parameter 'coherence_um' = {l} is out of range: accepted [{}, {}] um (at least {} periods: the finite-coherence model needs coherence >> period)",
+                format_bound(coherence_lo),
+                format_bound(range::COHERENCE_MAX_UM),
+                range::COHERENCE_MIN_PERIODS
+            )))
+        }
+        Some(l) => l,
+        None => defaults(CD_COHERENCE_UM.max(coherence_lo)).ok_or_else(|| {
+            err(format!(
+                "missing parameter 'coherence_um' for surface 'periodic' (accepted range [{}, {}] um)",
+                format_bound(coherence_range.0),
+                format_bound(coherence_range.1)
+            ))
+        })?,
+    };
+    let height = r.ranged("height_um", range::HEIGHT_UM, true, " um")?;
+    let width = r.ranged(
+        "width_um",
+        (0.0, period_um),
+        true,
+        " um (0 < width <= period_um)",
+    )?;
+    let profile_value = r.obj.get("profile");
+    let kind = match profile_value {
+        None if compact_disc => "rect",
+        None => {
+            return Err(err(
+                "missing parameter 'profile' for surface 'periodic' (accepted: \"rect\", \"sine\", {\"heights_um\": [...]})".into(),
+            ))
+        }
+        Some(Value::String(s)) => s.as_str(),
+        Some(Value::Object(_)) => "tabulated",
+        Some(other) => {
+            return Err(err(format!(
+                "parameter 'profile' must be \"rect\", \"sine\" or {{\"heights_um\": [...]}}, got {}",
+                type_name(other)
+            )))
+        }
+    };
+    let need_height = |what: &str| -> Result<f64, StamError> {
+        height.or(defaults(CD_BUMP_HEIGHT_UM)).ok_or_else(|| {
+            err(format!(
+                "missing parameter 'height_um' for profile '{what}' (accepted range [{}, {}] um)",
+                range::HEIGHT_UM.0,
+                range::HEIGHT_UM.1
+            ))
+        })
+    };
+    let profile = match kind {
+        "rect" => {
+            let height_um = need_height("rect")?;
+            let width_um = match width.or(defaults(CD_BUMP_WIDTH_UM.min(period_um))) {
+                Some(w) => w,
+                None => {
+                    return Err(err(format!(
+                        "missing parameter 'width_um' for profile 'rect' (accepted range (0, {period_um}] um, at most the period)"
+                    )))
+                }
+            };
+            Profile::Rect {
+                height_um,
+                width_um,
+            }
+        }
+        "sine" => {
+            if width.is_some() {
+                return Err(err(
+                    "parameter 'width_um' does not apply to profile 'sine' (only 'height_um')".into(),
+                ));
+            }
+            Profile::Sine {
+                height_um: need_height("sine")?,
+            }
+        }
+        "tabulated" => {
+            if height.is_some() || width.is_some() {
+                return Err(err(
+                    "parameters 'height_um' and 'width_um' do not apply to a tabulated profile (its heights are given in 'heights_um')".into(),
+                ));
+            }
+            Profile::Tabulated {
+                heights_um: parse_heights(profile_value.unwrap())?,
+            }
+        }
+        other => {
+            return Err(err(format!(
+                "unknown profile '{other}' for parameter 'profile' (accepted: \"rect\", \"sine\", {{\"heights_um\": [...]}})"
+            )))
+        }
+    };
+    Ok(PeriodicParams {
+        period_um,
+        coherence_um,
+        profile,
+    })
+}
+
+fn parse_heights(value: &Value) -> Result<Vec<f64>, StamError> {
+    let Value::Object(obj) = value else {
+        unreachable!("caller matched an object")
+    };
+    for key in obj.keys() {
+        if key != "heights_um" {
+            return Err(err(format!(
+                "unknown key '{key}' in parameter 'profile' (a tabulated profile is {{\"heights_um\": [...]}})"
+            )));
+        }
+    }
+    let Some(Value::Array(items)) = obj.get("heights_um") else {
+        return Err(err(
+            "parameter 'profile.heights_um' must be an array of heights in um (one period, uniformly spaced)".into(),
+        ));
+    };
+    let (lo, hi) = range::HEIGHTS_LEN;
+    if items.len() < lo || items.len() > hi {
+        return Err(err(format!(
+            "parameter 'profile.heights_um' has {} samples: accepted {lo} to {hi}",
+            items.len()
+        )));
+    }
+    let mut heights = Vec::with_capacity(items.len());
+    for (i, item) in items.iter().enumerate() {
+        match item.as_f64() {
+            Some(h) if h.is_finite() && h.abs() <= range::HEIGHT_UM.1 => heights.push(h),
+            _ => {
+                return Err(err(format!(
+                    "parameter 'profile.heights_um[{i}]' must be a finite number in [-{}, {}] um",
+                    range::HEIGHT_UM.1,
+                    range::HEIGHT_UM.1
+                )))
+            }
+        }
+    }
+    Ok(heights)
+}

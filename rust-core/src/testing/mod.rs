@@ -1,0 +1,33 @@
+//! Test utilities shared by the core's unit tests: direction sets and the
+//! chi-square goodness-of-fit harness of the sampling strategies.
+
+pub mod chi2;
+
+use glam::DVec3;
+
+/// Pairs of directions at four incidences, around each one's mirror
+/// direction (where a BRDF's features are) and towards the horizon.
+pub fn directions() -> Vec<(DVec3, DVec3)> {
+    let mut out = Vec::new();
+    for &(ti, phi_i) in &[(0.05, 0.0), (0.5, 0.3), (1.1, 1.0), (1.45, 2.0)] {
+        let wi = DVec3::new(
+            f64::sin(ti) * f64::cos(phi_i),
+            f64::sin(ti) * f64::sin(phi_i),
+            f64::cos(ti),
+        );
+        for &(to, dphi) in &[(0.0, 0.0), (0.1, 0.2), (0.3, 0.5), (0.6, 2.5), (1.2, 3.0)] {
+            // Around the mirror direction of wi.
+            let m = DVec3::new(-wi.x, -wi.y, wi.z);
+            let tilt = DVec3::new(
+                f64::sin(to) * f64::cos(dphi),
+                f64::sin(to) * f64::sin(dphi),
+                0.0,
+            );
+            let wo = (m + tilt).normalize();
+            if wo.z > 0.01 {
+                out.push((wi, wo));
+            }
+        }
+    }
+    out
+}
