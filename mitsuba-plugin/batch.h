@@ -61,8 +61,12 @@ struct Scratch {
     std::vector<uint8_t> coh;
 };
 
+/// Luminance of a linear sRGB triple, with the core's weights (stam.h): the
+/// core gamut-maps its RGB outputs at constant luminance with these, so a
+/// monochromatic variant sees exactly the luminance the core preserved.
 inline float luminance(const float *rgb) {
-    return 0.212671f * rgb[0] + 0.715160f * rgb[1] + 0.072169f * rgb[2];
+    return (float) STAM_SRGB_LUMINANCE_R * rgb[0] + (float) STAM_SRGB_LUMINANCE_G * rgb[1] +
+           (float) STAM_SRGB_LUMINANCE_B * rgb[2];
 }
 
 /// AoS (k per lane) -> SoA; Mono takes the luminance of the core's RGB.

@@ -164,7 +164,8 @@ first sample, and returns the mean of the wavelengths' densities, which is
 exactly the strategy's density (the unbiased multi-wavelength mixture). Each
 query goes to the core's path-vertex calls in one call per batch
 (``eval_pdf_sample`` builds the strategy once for the light direction and the
-sample). Monochromatic variants take the luminance of the core's RGB output.
+sample). Monochromatic variants take the luminance of the core's RGB output
+(with the core's weights, ``STAM_SRGB_LUMINANCE_*`` in stam.h).
 
 LLVM variants need evaluated mode: ``dr.set_flag(dr.JitFlag.SymbolicLoops,
 False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
