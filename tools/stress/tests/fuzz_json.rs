@@ -378,17 +378,16 @@ fn fuzz_parameters_and_abi() {
     assert!(ACCEPTED.load(Ordering::Relaxed) > 0);
 }
 
-/// Valid materials with random float inputs: the fuzzer's "on success" path
-/// must actually be reached, not only refusals.
+/// Valid materials (those tagged `fuzz` in tests/materials.json) with random
+/// float inputs: the fuzzer's "on success" path must actually be reached, not
+/// only refusals.
 #[test]
 fn fuzz_reaches_accepted_materials() {
     let accepted_before = ACCEPTED.load(Ordering::Relaxed);
-    for json in [
-        r#"{"surface":"cd"}"#,
-        r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2}"#,
-        r#"{"surface":"fractal","hurst":0.4,"sigma_um":0.1,"lag_um":1}"#,
-    ] {
-        exercise(json, &[0.1, 0.2, 0.9, f32::NAN, 500.0, -0.3, 0.7]).unwrap();
+    let materials = stress::materials::tagged("fuzz");
+    assert_eq!(materials.len(), 3);
+    for m in &materials {
+        exercise(&m.params, &[0.1, 0.2, 0.9, f32::NAN, 500.0, -0.3, 0.7]).unwrap();
     }
     assert!(ACCEPTED.load(Ordering::Relaxed) >= accepted_before + 3);
     println!(
