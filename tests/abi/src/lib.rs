@@ -120,15 +120,22 @@ mod tests {
         );
     }
 
+    /// The core's JSON parameters of the materials tagged `abi` in the
+    /// project's shared list of test materials, tests/materials.json.
+    fn abi_materials() -> Vec<String> {
+        let all: Vec<serde_json::Value> =
+            serde_json::from_str(include_str!("../../materials.json")).unwrap();
+        all.iter()
+            .filter(|e| e["tags"].as_array().unwrap().iter().any(|t| t == "abi"))
+            .map(|e| e["params"].to_string())
+            .collect()
+    }
+
     #[test]
     fn c_caller_exercises_every_function() {
-        for params in [
-            r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":2.0}"#,
-            r#"{"surface":"gaussian","sigma_um":0.3,"corr_x_um":1.0,"corr_y_um":20.0,"fresnel":"gold"}"#,
-            r#"{"surface":"fractal","hurst":0.6,"sigma_um":0.1,"lag_um":1.0}"#,
-            r#"{"surface":"cd"}"#,
-            r#"{"surface":"periodic","period_um":1.2,"coherence_um":30,"profile":"sine","height_um":0.2,"fresnel":0.8}"#,
-        ] {
+        let materials = abi_materials();
+        assert_eq!(materials.len(), 5);
+        for params in &materials {
             run_c_caller(params).unwrap_or_else(|e| panic!("{params}: {e}"));
         }
     }
