@@ -22,6 +22,7 @@ STAM_LIB  ?= $(STAM_LIB_DEFAULT)
 STAM_H    := rust-core/include/stam.h
 PLUGIN_SO := $(BUILD)/plugins/diffraction.so
 PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
+PLUGIN_HDR := mitsuba-plugin/batch.h mitsuba-plugin/params_json.h
 
 # Package locations, computed once and only when needed (no import of mitsuba).
 pkgdir = $(shell $(PYTHON) -c "import importlib.util as u; print(u.find_spec('$(1)').submodule_search_locations[0])")
@@ -69,7 +70,7 @@ else
 plugin: $(PLUGIN_SO)
 endif
 
-$(PLUGIN_SO): $(PLUGIN_SRC) $(STAM_H) $(STAM_LIB)
+$(PLUGIN_SO): $(PLUGIN_SRC) $(PLUGIN_HDR) $(STAM_H) $(STAM_LIB)
 	@mkdir -p $(dir $@)
 	$(CXX) $(PLUGIN_CXXFLAGS) $(PLUGIN_SRC) -o $@ $(PLUGIN_LDFLAGS) $(PLUGIN_LIBS)
 

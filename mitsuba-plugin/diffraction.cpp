@@ -2,14 +2,19 @@
  * (J. Stam, "Diffraction Shaders", SIGGRAPH 1999).
  *
  * This file contains no physics. It converts Mitsuba properties into the JSON
- * parameter object of the Rust core (rust-core/include/stam.h), builds the
- * local frame the core expects (twist, concentric tracks), and forwards
- * eval / pdf / sample to the core's batch C ABI.
+ * parameter object of the Rust core (rust-core/include/stam.h; params_json.h),
+ * builds the local frame the core expects (twist, concentric tracks), and
+ * forwards eval / pdf / sample to the core's batch C ABI (batch.h stages the
+ * arrays into host buffers, makes the call and loads the results back).
  *
  * Variants: scalar_* call the core per query; llvm_ad_* run in Dr.Jit's
  * evaluated mode (dr.JitFlag.SymbolicLoops / SymbolicCalls off) and call the
  * core once per batch; cuda_ad_* compile but refuse construction (the core is
  * CPU code). See scripts/stam_mitsuba.py for the Python-side setup.
+ *
+ * Layout (as Mitsuba's roughconductor.cpp): the manual, the constructor,
+ * traverse, parameters_changed, the BSDF methods, to_string, then the
+ * private helpers and members.
  */
 
 #include <mitsuba/core/properties.h>
@@ -19,14 +24,13 @@
 
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
-#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "../rust-core/include/stam.h"
+#include "batch.h"
+#include "params_json.h"
 
 NAMESPACE_BEGIN(mitsuba)
 
@@ -43,60 +47,112 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |string|
    - Microsurface model: ``gaussian``, ``fractal``, ``periodic`` or ``cd``
      (compact disc: a periodic surface with Stam's dimensions).
+     (Default: none, required)
  * - sigma_um
    - |float|
-   - Gaussian surfaces: rms height (micrometres).
+   - Gaussian surfaces: rms height; fractal surfaces: rms height difference
+     over ``lag_um``. Micrometres, in [1e-6, 100]. (Default: none, required)
+   - |exposed|
  * - corr_um
    - |float|
-   - Gaussian surfaces: isotropic correlation length T (micrometres).
+   - Gaussian surfaces: isotropic correlation length T. Micrometres, in
+     [1e-3, 1e5]. (Default: none; give either it or both ``corr_x_um`` and
+     ``corr_y_um``)
+   - |exposed|
  * - corr_x_um, corr_y_um
    - |float|
    - Gaussian surfaces: anisotropic correlation lengths along the tangent
-     (x) and bitangent (y) (micrometres; brushed metal).
+     (x) and bitangent (y) (brushed metal). Micrometres, each in [1e-3, 1e5].
+     (Default: none)
+   - |exposed|
  * - hurst
    - |float|
-   - Fractal surfaces: Hurst exponent H in [0.001, 1].
+   - Fractal surfaces: Hurst exponent H (dimensionless), in [0.001, 1].
+     (Default: none, required)
+   - |exposed|
  * - lag_um
    - |float|
-   - Fractal surfaces: lag L over which the rms height difference is sigma_um.
+   - Fractal surfaces: lag L over which the rms height difference is
+     ``sigma_um``. Micrometres, in [1e-3, 1e5]. (Default: none, required)
+   - |exposed|
  * - period_um
    - |float|
-   - Periodic surfaces: period of the profile along the tangent.
+   - Periodic surfaces: period of the profile along the tangent (track
+     pitch). Micrometres, in [0.05, 1000]. (Default: ``cd``: 2.5;
+     ``periodic``: none, required)
+   - |exposed|
  * - coherence_um
    - |float|
-   - Periodic surfaces: coherence length l of the illumination.
+   - Periodic surfaces: coherence length l of the illumination. Micrometres,
+     in [1.5 period, 1e4]. (Default: ``cd``: 50, at least 1.5 periods;
+     ``periodic``: none, required)
+   - |exposed|
  * - profile
    - |string|
    - Periodic surfaces: ``rect``, ``sine``, or a tabulated profile given as a
-     string of comma-separated heights in micrometres over one period
-     (passed to the core as ``{"heights_um": [...]}``).
- * - height_um, width_um
+     string of 2 to 65536 comma-separated heights in micrometres over one
+     period (passed to the core as ``{"heights_um": [...]}``).
+     (Default: ``cd``: ``rect``; ``periodic``: none, required)
+ * - height_um
    - |float|
-   - Periodic surfaces: bump height and (``rect``) bump width.
+   - Periodic surfaces, ``rect`` and ``sine`` profiles: bump height (rect),
+     peak-to-peak height (sine). Micrometres, in (0, 100]. (Default: ``cd``:
+     0.15; otherwise none, required)
+   - |exposed|
+ * - width_um
+   - |float|
+   - Periodic surfaces, ``rect`` profile: bump width per period.
+     Micrometres, in (0, period]. (Default: ``cd``: 0.5, at most the period;
+     otherwise none, required)
+   - |exposed|
  * - fresnel
    - |float| or |string|
-   - Reflectance F^2 as a constant, or a metal name: ``aluminium``,
-     ``silver``, ``gold``, ``copper``, ``chromium``.
+   - Reflectance F^2 as a constant in (0, 1], or a metal with a measured
+     spectral index: ``aluminium``, ``silver``, ``gold``, ``copper``,
+     ``chromium``. (Default: ``aluminium``)
+   - |exposed| (the constant)
  * - eta, k
    - |float|
-   - Alternative to ``fresnel``: complex index of refraction eta + i k
-     (passed as ``"fresnel": {"eta": .., "k": ..}``).
+   - Alternative to ``fresnel``: a constant complex index of refraction
+     eta + i k (dimensionless; eta in [1e-3, 100], k in [0, 100]; passed as
+     ``"fresnel": {"eta": .., "k": ..}``). (Default: none; k: 0 when eta is
+     given)
+   - |exposed|
+ * - series_tolerance
+   - |float|
+   - Gaussian surfaces: relative truncation tolerance of the Poisson series
+     (dimensionless), in [1e-12, 0.1]. (Default: 1e-5)
+   - |exposed|
+ * - rgb_nodes
+   - |int|
+   - Gaussian and fractal surfaces: wavelength nodes of the RGB rule for
+     smooth spectra, an integer in [4, 64]. (Default: 12 for Gaussian, 8 for
+     fractal surfaces)
+   - |exposed|
  * - twist
    - |float|
-   - Rotation of the tangent frame about the normal, in degrees (default: 0).
+   - Rotation of the tangent frame about the normal, in degrees.
+     (Default: 0)
+   - |exposed|
  * - tracks
    - |string|
-   - ``linear`` (default: the periodic direction is the shading tangent) or
+   - ``linear`` (the periodic direction is the shading tangent) or
      ``concentric``: the periodic direction is radial about (center_u,
      center_v) in the uv parametrisation and the grooves follow the circles.
+     (Default: ``linear``)
  * - center_u, center_v
    - |float|
-   - Centre of concentric tracks in uv space (default: 0.5, 0.5).
+   - Centre of concentric tracks in uv space (uv units; only with
+     ``tracks`` = ``concentric``). (Default: 0.5, 0.5)
+   - |exposed| (concentric tracks)
 
 Only the parameters given by the user are passed to the core, which applies
-its own defaults and validates names and ranges; its error messages are
-raised as exceptions. Numeric parameters are exposed through ``mi.traverse``
-(non-differentiable); changing them rebuilds the core material.
+its own defaults (the ones above, from ``rust-core/src/params.rs``) and
+validates names and ranges; its error messages are raised as exceptions.
+The numeric parameters the user gives, ``twist`` always and ``center_u``,
+``center_v`` with concentric tracks are exposed through ``mi.traverse``
+(non-differentiable); changing them rebuilds the core material. ``docs/parameters.md`` has the
+same table for the core's JSON keys.
 
 Components: 0 = the diffracted (glossy) lobe; 1 = the coherent mirror lobe
 (a delta component, present when the core reports one, e.g. Gaussian
@@ -108,7 +164,8 @@ first sample, and returns the mean of the wavelengths' densities, which is
 exactly the strategy's density (the unbiased multi-wavelength mixture). Each
 query goes to the core's path-vertex calls in one call per batch
 (``eval_pdf_sample`` builds the strategy once for the light direction and the
-sample).
+sample). Monochromatic variants take the luminance of the core's RGB output
+(with the core's weights, ``STAM_SRGB_LUMINANCE_*`` in stam.h).
 
 LLVM variants need evaluated mode: ``dr.set_flag(dr.JitFlag.SymbolicLoops,
 False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
@@ -132,172 +189,15 @@ False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
         'fresnel': 'gold'
 */
 
-namespace {
-
-// ---------------------------------------------------------------------------
-// Host-side batch evaluation (AoS float buffers, no Mitsuba types)
-// ---------------------------------------------------------------------------
-
-enum class Channels { Rgb, Mono, Spectral };
-
-struct CoreFree {
-    void operator()(StamBrdf *b) const { stam_brdf_free(b); }
-};
-using CorePtr = std::unique_ptr<StamBrdf, CoreFree>;
-
-/// One batch of queries and results. Inputs are AoS (as the core wants them),
-/// outputs are SoA (one contiguous run of n floats per channel) so that JIT
-/// variants can load each channel as one array.
-struct Batch {
-    size_t n = 0;
-    // Inputs
-    std::vector<float> wi;   // 3 n, core frame
-    std::vector<float> wo;   // 3 n, core frame (eval / pdf queries)
-    std::vector<float> lam;  // n * nw, lane-major (spectral only)
-    std::vector<float> rnd;  // 3 n (sampling only)
-    bool want_f = false, want_pdf = false, want_sample = false;
-    // Outputs (SoA)
-    std::vector<float> f;      // nc * n: f(wi, wo), NOT multiplied by cos
-    std::vector<float> pdf;    // n: pdf(wo), mixture over wavelengths
-    std::vector<float> s_wo;   // 3 * n: sampled direction, core frame
-    std::vector<float> s_pdf;  // n: pdf of the sample (mixture probability if coherent)
-    std::vector<float> s_coh;  // n: 1 if the coherent lobe was sampled
-    std::vector<float> s_val;  // nc * n: f at s_wo, or coherent reflectance
-};
-
-/// Temporaries of one batch (AoS outputs of the core). Scalar variants keep
-/// one per thread, so that a call allocates nothing once the buffers have
-/// grown (a dozen malloc/free pairs per call were ~8% of a scalar render).
-struct Scratch {
-    std::vector<float> aos, wo, val;
-    std::vector<uint8_t> coh;
-};
-
-inline float luminance(const float *rgb) {
-    return 0.212671f * rgb[0] + 0.715160f * rgb[1] + 0.072169f * rgb[2];
-}
-
-/// AoS (k per lane) -> SoA; Mono takes the luminance of the core's RGB.
-void to_soa(const float *aos, size_t n, size_t k, Channels ch, float *soa) {
-    if (ch == Channels::Mono) {
-        for (size_t i = 0; i < n; ++i)
-            soa[i] = luminance(aos + 3 * i);
-        return;
-    }
-    for (size_t i = 0; i < n; ++i)
-        for (size_t c = 0; c < k; ++c)
-            soa[c * n + i] = aos[i * k + c];
-}
-
-/// Run every requested query of a batch through the core's path-vertex
-/// calls (one call when a lane asks for both, so that the core builds its
-/// strategy once): spectral lanes pass their nw wavelengths (the core samples
-/// with one of them and returns the mixture density over all, see stam.h);
-/// RGB and Mono lanes pass none (Mono is the luminance of RGB).
-void run_batch(const StamBrdf *core, Channels ch, size_t nw, Batch &b, Scratch &tmp) {
-    const size_t n = b.n;
-    const bool spectral = ch == Channels::Spectral;
-    const float *lam = spectral ? b.lam.data() : nullptr;
-    const size_t core_nw = spectral ? nw : 0,
-                 core_nc = spectral ? nw : 3,        // floats per lane from the core
-                 nc = ch == Channels::Mono ? 1 : core_nc;
-    const bool eval = b.want_f || b.want_pdf;
-
-    float *f = nullptr, *pdf = nullptr;
-    if (eval) {
-        tmp.aos.resize(core_nc * n);
-        b.pdf.assign(n, 0.f);
-        f = b.want_f ? tmp.aos.data() : nullptr;
-        pdf = b.want_pdf ? b.pdf.data() : nullptr;
-    }
-    if (b.want_sample) {
-        tmp.wo.resize(3 * n);
-        b.s_pdf.resize(n);
-        tmp.coh.resize(n);
-        tmp.val.resize(core_nc * n);
-    }
-    if (eval && b.want_sample)
-        stam_brdf_eval_pdf_sample_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw,
-                                         b.rnd.data(), f, pdf, tmp.wo.data(), b.s_pdf.data(),
-                                         tmp.coh.data(), tmp.val.data());
-    else if (eval)
-        stam_brdf_eval_pdf_vertex(core, n, b.wi.data(), b.wo.data(), lam, core_nw, f, pdf);
-    else if (b.want_sample)
-        stam_brdf_sample_vertex(core, n, b.wi.data(), lam, core_nw, b.rnd.data(),
-                                tmp.wo.data(), b.s_pdf.data(), tmp.coh.data(), tmp.val.data());
-
-    if (b.want_f) {
-        b.f.resize(nc * n);
-        to_soa(tmp.aos.data(), n, core_nc, ch, b.f.data());
-    }
-    if (b.want_sample) {
-        b.s_wo.resize(3 * n);
-        to_soa(tmp.wo.data(), n, 3, Channels::Rgb, b.s_wo.data());
-        b.s_coh.resize(n);
-        for (size_t i = 0; i < n; ++i)
-            b.s_coh[i] = tmp.coh[i] ? 1.f : 0.f;
-        b.s_val.resize(nc * n);
-        to_soa(tmp.val.data(), n, core_nc, ch, b.s_val.data());
-    }
-}
-
-// ---------------------------------------------------------------------------
-// Parameters -> JSON
-// ---------------------------------------------------------------------------
-
-std::string json_escape(const std::string &s) {
-    std::string out = "\"";
-    for (char ch : s) {
-        unsigned char c = (unsigned char) ch;
-        if (c == '"' || c == '\\') {
-            out += '\\';
-            out += ch;
-        } else if (c < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof(buf), "\\u%04x", c);
-            out += buf;
-        } else {
-            out += ch;
-        }
-    }
-    return out + "\"";
-}
-
-/// Shortest decimal form that reads back as the same double
-std::string json_number(double v) {
-    char buf[40];
-    for (int prec = 15; prec <= 17; ++prec) {
-        std::snprintf(buf, sizeof(buf), "%.*g", prec, v);
-        if (std::strtod(buf, nullptr) == v)
-            break;
-    }
-    return buf;
-}
-
-/// Parse "0.1, 0.2,0.3" into numbers; false if it is not such a list.
-bool parse_number_list(const std::string &s, std::vector<double> &out) {
-    const char *p = s.c_str();
-    out.clear();
-    while (true) {
-        while (*p == ' ' || *p == '\t' || *p == '\n')
-            ++p;
-        char *end = nullptr;
-        double v = std::strtod(p, &end);
-        if (end == p)
-            return false;
-        out.push_back(v);
-        p = end;
-        while (*p == ' ' || *p == '\t' || *p == '\n')
-            ++p;
-        if (*p == '\0')
-            return !out.empty();
-        if (*p != ',')
-            return false;
-        ++p;
-    }
-}
-
-} // namespace
+// The host-side helpers (batch.h, params_json.h)
+using diffraction_detail::Batch;
+using diffraction_detail::BatchIO;
+using diffraction_detail::CorePtr;
+using diffraction_detail::json_escape;
+using diffraction_detail::json_number;
+using diffraction_detail::parse_number_list;
+using diffraction_detail::run_batch;
+using diffraction_detail::Scratch;
 
 template <typename Float, typename Spectrum>
 class Diffraction final : public BSDF<Float, Spectrum> {
@@ -307,18 +207,13 @@ public:
 
     enum class Tracks { Linear, Concentric };
 
-    static constexpr bool IsSpectral = is_spectral_v<Spectrum>;
-    static constexpr bool IsMono = is_monochromatic_v<Spectrum>;
-    static constexpr size_t NW = IsSpectral ? dr::size_v<Wavelength> : 0;
-    static constexpr size_t NC = dr::size_v<UnpolarizedSpectrum>;
-    static constexpr Channels Ch =
-        IsSpectral ? Channels::Spectral : (IsMono ? Channels::Mono : Channels::Rgb);
+    using IO = BatchIO<Float, Spectrum>;
 
     Diffraction(const Properties &props) : Base(props) {
         if constexpr (dr::is_cuda_v<Float>)
             Throw("diffraction: CUDA variants are not supported (the Rust core "
                   "runs on the CPU): use an llvm_ad_* or scalar_* variant.");
-        static_assert(!IsSpectral || NW == NC, "unexpected spectrum layout");
+        static_assert(!IO::IsSpectral || IO::NW == IO::NC, "unexpected spectrum layout");
 
         // Plugin-level parameters are handled here; everything else is
         // forwarded to the core under its own name (the core refuses
@@ -656,50 +551,27 @@ private:
         b.want_sample = do_sample;
 
         // ---- Stage inputs, call the core, read outputs --------------------
-        std::vector<Float> out_f, out_pdf, out_swo, out_spdf, out_scoh, out_sval;
-        if constexpr (!dr::is_jit_v<Float>) {
-            b.n = 1;
-            b.wi.assign({ wi_c.x(), wi_c.y(), wi_c.z() });
-            b.wo.assign({ wo_c.x(), wo_c.y(), wo_c.z() });
-            b.lam.clear();
-            if constexpr (IsSpectral)
-                for (size_t j = 0; j < NW; ++j)
-                    b.lam.push_back(si.wavelengths[j]);
-            b.rnd.clear();
-            if (do_sample)
-                b.rnd.assign({ *sample1, sample2->x(), sample2->y() });
-            run_batch(m_core.get(), Ch, NW, b, tmp);
-        } else if constexpr (dr::is_llvm_v<Float>) {
-            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
-                Throw("diffraction: the native core needs concrete arrays, but this "
-                      "call is being recorded symbolically. Disable "
-                      "dr.JitFlag.SymbolicLoops and dr.JitFlag.SymbolicCalls "
-                      "(evaluated mode), e.g. with scripts/stam_mitsuba.py's setup(), "
-                      "and do not use dr.freeze with this BSDF.");
-            stage_jit(b, wi_c, wo_c, si, sample1, sample2, do_sample, active_e || active_s);
-            run_batch(m_core.get(), Ch, NW, b, tmp);
-        } else {
-            Throw("diffraction: unsupported backend");
-        }
+        IO::stage(b, wi_c, wo_c, si, sample1, sample2, do_sample, active_e || active_s);
+        run_batch(m_core.get(), IO::Ch, IO::NW, b, tmp);
 
         // ---- Eval / pdf ----------------------------------------------------
         if (do_eval) {
             Float cos_o = Frame3f::cos_theta(*wo);
             if (b.want_f) {
-                UnpolarizedSpectrum f = load_spectrum(b.f, b.n);
+                UnpolarizedSpectrum f = IO::load_spectrum(b.f, b.n);
                 q.value = dr::select(active_e, f * cos_o, 0.f);
             }
             if (b.want_pdf)
-                q.pdf = dr::select(active_e, load(b.pdf, 0, b.n), 0.f);
+                q.pdf = dr::select(active_e, IO::load(b.pdf, 0, b.n), 0.f);
         }
 
         // ---- Sample --------------------------------------------------------
         if (do_sample) {
-            Vector3f swo_c(load(b.s_wo, 0, b.n), load(b.s_wo, 1, b.n),
-                           load(b.s_wo, 2, b.n));
-            Float spdf = load(b.s_pdf, 0, b.n);
-            Mask coh = load(b.s_coh, 0, b.n) > .5f;
-            UnpolarizedSpectrum sval = load_spectrum(b.s_val, b.n);
+            Vector3f swo_c(IO::load(b.s_wo, 0, b.n), IO::load(b.s_wo, 1, b.n),
+                           IO::load(b.s_wo, 2, b.n));
+            Float spdf = IO::load(b.s_pdf, 0, b.n);
+            Mask coh = IO::load(b.s_coh, 0, b.n) > .5f;
+            UnpolarizedSpectrum sval = IO::load_spectrum(b.s_val, b.n);
 
             Vector3f swo = from_core(swo_c, c, s);
             Float cos_o = Frame3f::cos_theta(swo);
@@ -731,86 +603,6 @@ private:
                 const Point2f &sample2, Mask active) const {
         Query q = make_query(ctx, si, nullptr, &sample1, &sample2, false, false, active);
         return { q.bs, q.weight };
-    }
-
-    // ---- Host <-> Mitsuba types ---------------------------------------------
-
-    /// Channel k of an SoA host buffer as a Float
-    static Float load(const std::vector<float> &soa, size_t k, size_t n) {
-        if constexpr (dr::is_jit_v<Float>)
-            return dr::load<Float>(soa.data() + k * n, n);
-        else
-            return soa[k];
-    }
-
-    static UnpolarizedSpectrum load_spectrum(const std::vector<float> &soa, size_t n) {
-        UnpolarizedSpectrum r;
-        for (size_t k = 0; k < NC; ++k)
-            r[k] = load(soa, k, n);
-        return r;
-    }
-
-    /// JIT variants: evaluate the inputs and copy them into the batch (AoS).
-    void stage_jit(Batch &b, const Vector3f &wi_c, const Vector3f &wo_c,
-                   const SurfaceInteraction3f &si, const Float *sample1,
-                   const Point2f *sample2, bool do_sample, const Mask &active) const {
-        if constexpr (dr::is_jit_v<Float>) {
-            std::vector<Float> in;
-            for (size_t k = 0; k < 3; ++k)
-                in.push_back(dr::detach(wi_c[k]));
-            for (size_t k = 0; k < 3; ++k)
-                in.push_back(dr::detach(wo_c[k]));
-            if constexpr (IsSpectral)
-                for (size_t j = 0; j < NW; ++j)
-                    in.push_back(dr::detach(si.wavelengths[j]));
-            if (do_sample) {
-                in.push_back(dr::detach(*sample1));
-                in.push_back(dr::detach(sample2->x()));
-                in.push_back(dr::detach(sample2->y()));
-            }
-            size_t n = dr::width(active);
-            for (const Float &x : in)
-                n = std::max(n, dr::width(x));
-            for (Float &x : in)
-                dr::schedule(x);
-            dr::eval();
-            dr::sync_thread();
-
-            std::vector<const float *> ptr(in.size());
-            for (size_t k = 0; k < in.size(); ++k)
-                ptr[k] = in[k].data();
-            // Width-1 arrays (literals) broadcast over the batch
-            auto get = [&](size_t k, size_t i) {
-                return dr::width(in[k]) == 1 ? ptr[k][0] : ptr[k][i];
-            };
-
-            b.n = n;
-            b.wi.resize(3 * n);
-            b.wo.resize(3 * n);
-            for (size_t i = 0; i < n; ++i)
-                for (size_t k = 0; k < 3; ++k) {
-                    b.wi[3 * i + k] = get(k, i);
-                    b.wo[3 * i + k] = get(3 + k, i);
-                }
-            size_t at = 6;
-            if constexpr (IsSpectral) {
-                b.lam.resize(NW * n);
-                for (size_t i = 0; i < n; ++i)
-                    for (size_t j = 0; j < NW; ++j)
-                        b.lam[i * NW + j] = get(at + j, i);
-                at += NW;
-            }
-            if (do_sample) {
-                b.rnd.resize(3 * n);
-                for (size_t i = 0; i < n; ++i)
-                    for (size_t k = 0; k < 3; ++k)
-                        b.rnd[3 * i + k] = get(at + k, i);
-            }
-        } else {
-            DRJIT_MARK_USED(b); DRJIT_MARK_USED(wi_c); DRJIT_MARK_USED(wo_c);
-            DRJIT_MARK_USED(si); DRJIT_MARK_USED(sample1); DRJIT_MARK_USED(sample2);
-            DRJIT_MARK_USED(do_sample); DRJIT_MARK_USED(active);
-        }
     }
 
     // ---- Members ----------------------------------------------------------

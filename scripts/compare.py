@@ -28,7 +28,7 @@ fractal, periodic grating with a twist, compact disc with concentric tracks):
 Each fails above 1 % relative RMSE (inside the sample, edge pixels excluded).
 Plus: the compact disc in scalar_spectral vs scalar_rgb (both Mitsuba) under a
 white light, relative L1 error over lit pixels <= 3 %, and BRDF slice plots
-(Mitsuba's bsdf.eval vs the core through ctypes on target/release/libstam.so).
+(Mitsuba's bsdf.eval vs the core through its C ABI: scripts/stam_core.py).
 
 Writes out/compare/: <model>_<check>.png (Mitsuba | Rust-only | |difference|
 heat map), slices_<model>.png, report.md; with --write-docs also docs/compare.md.
@@ -36,7 +36,6 @@ Exit status 1 when a check fails.
 """
 
 import argparse
-import ctypes
 import json
 import math
 import os
@@ -50,11 +49,12 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-import stam_mitsuba  # noqa: E402
+import stam_core  # noqa: E402
 import stam_images  # noqa: E402
+import stam_materials  # noqa: E402
+import stam_mitsuba  # noqa: E402
 
 RENDER_BIN = os.path.join(ROOT, 'target', 'release', 'stam-render')
-LIBSTAM = os.path.join(ROOT, 'target', 'release', 'libstam.so')
 OUT_DIR = os.path.join(ROOT, 'out', 'compare')
 
 RMSE_LIMIT = 0.01        # relative RMSE, Mitsuba vs Rust-only
@@ -63,21 +63,13 @@ SLICE_LIMIT = 1e-3       # relative difference of bsdf.eval vs the core along sl
 BANDS_NM = (450.0, 520.0, 590.0, 660.0)
 BAND_HALF_WIDTH_NM = 1.0
 
-# One configuration per microsurface model: the core's JSON parameters plus the
+# One configuration per microsurface model: the core's JSON parameters (the
+# materials tagged `compare` in tests/materials.json, by label) plus the
 # plugin's frame parameters (twist in degrees, tracks).
-MODELS = {
-    'gaussian': dict(material={'surface': 'gaussian', 'sigma_um': 0.08, 'corr_um': 1.5,
-                               'fresnel': 'aluminium'}),
-    'gaussian_aniso': dict(material={'surface': 'gaussian', 'sigma_um': 0.1,
-                                     'corr_x_um': 0.8, 'corr_y_um': 6.0,
-                                     'fresnel': 'aluminium'}, twist_deg=30.0),
-    'fractal': dict(material={'surface': 'fractal', 'sigma_um': 0.05, 'hurst': 0.7,
-                              'lag_um': 1.0, 'fresnel': 'silver'}),
-    'periodic': dict(material={'surface': 'periodic', 'period_um': 1.6, 'profile': 'sine',
-                               'height_um': 0.25, 'coherence_um': 8.0, 'fresnel': 'gold'},
-                     twist_deg=20.0),
-    'cd': dict(material={'surface': 'cd'}, tracks='concentric'),
-}
+FRAMES = {'gaussian_aniso': dict(twist_deg=30.0), 'periodic': dict(twist_deg=20.0),
+          'cd': dict(tracks='concentric')}
+MODELS = {name: dict(FRAMES.get(name, {}), material=params)
+          for name, params in stam_materials.by_label('compare').items()}
 # Wavelength step of the Rust-only CIE integration (spectral check): smooth
 # spectra need little, the narrow diffraction peaks of gratings 1 nm.
 CIE_STEP_NM = {'gaussian': 5.0, 'gaussian_aniso': 5.0, 'fractal': 5.0,
@@ -127,14 +119,7 @@ def render_rust(cfg):
 # ---------------------------------------------------------------------------
 
 def plugin_dict(cfg):
-    d = {'type': 'diffraction'}
-    for k, v in cfg['material'].items():
-        if k == 'fresnel' and isinstance(v, dict):
-            d.update(v)            # eta, k
-        elif k == 'profile' and isinstance(v, dict):
-            d[k] = ', '.join(repr(float(h)) for h in v['heights_um'])
-        else:
-            d[k] = v
+    d = {'type': 'diffraction', **stam_materials.plugin_params(cfg['material'])}
     if cfg.get('twist_deg'):
         d['twist'] = float(cfg['twist_deg'])
     if cfg.get('tracks', 'linear') != 'linear':
@@ -324,7 +309,7 @@ def gamut_map(img):
     gamut_map): desaturate towards the grey of equal luminance until the most
     negative channel reaches 0."""
     img = np.asarray(img, dtype=np.float64)
-    y = img @ np.array([0.2126, 0.7152, 0.0722])
+    y = img @ stam_core.SRGB_LUMINANCE
     low = img.min(axis=-1)
     out = img.copy()
     fix = (low < 0) & (y > 0)
@@ -353,7 +338,7 @@ def check_cd_spectral_vs_rgb(size, subpixels, out_dir=OUT_DIR, pictures=True,
     rgb, t_rgb = render_mitsuba('scalar_rgb', cfg)
     spec, t_spec = render_mitsuba('scalar_spectral', cfg)
     _, cov, _ = render_rust(dict(cfg, subpixels=1))
-    weights = np.array([0.2126, 0.7152, 0.0722])
+    weights = stam_core.SRGB_LUMINANCE
     lum = rgb @ weights
     lit = interior_mask(cov) & (lum > 0.01 * lum.max())
     # The spectral render's pixels are the exact projection of nearly pure
@@ -383,45 +368,11 @@ def check_cd_spectral_vs_rgb(size, subpixels, out_dir=OUT_DIR, pictures=True,
 # BRDF slices: Mitsuba's bsdf.eval vs the core (ctypes)
 # ---------------------------------------------------------------------------
 
-class Core:
-    """The core's C ABI (rust-core/include/stam.h) through ctypes."""
-
-    def __init__(self, path=LIBSTAM):
-        lib = ctypes.CDLL(path)
-        P = ctypes.POINTER(ctypes.c_float)
-        lib.stam_brdf_new.restype = ctypes.c_void_p
-        lib.stam_brdf_new.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
-        lib.stam_brdf_free.argtypes = [ctypes.c_void_p]
-        lib.stam_brdf_eval_rgb.argtypes = [ctypes.c_void_p, ctypes.c_size_t, P, P, P]
-        lib.stam_brdf_eval_spectral.argtypes = [ctypes.c_void_p, ctypes.c_size_t, P, P, P, P]
-        self.lib = lib
-
-    def eval(self, material, wi, wo, lam=None):
-        """f (without cos) for directions in the core's frame; (n, 3) RGB, or (n,)
-        at the wavelengths lam."""
-        err = ctypes.create_string_buffer(512)
-        b = self.lib.stam_brdf_new(json.dumps(material).encode(), err, 512)
-        if not b:
-            raise ValueError(err.value.decode())
-        try:
-            wi = np.ascontiguousarray(wi, dtype=np.float32)
-            wo = np.ascontiguousarray(wo, dtype=np.float32)
-            n = len(wi)
-            P = ctypes.POINTER(ctypes.c_float)
-            if lam is None:
-                out = np.zeros((n, 3), np.float32)
-                self.lib.stam_brdf_eval_rgb(b, n, wi.ctypes.data_as(P), wo.ctypes.data_as(P),
-                                            out.ctypes.data_as(P))
-            else:
-                lam = np.ascontiguousarray(np.broadcast_to(lam, (n,)), dtype=np.float32)
-                out = np.zeros(n, np.float32)
-                self.lib.stam_brdf_eval_spectral(b, n, wi.ctypes.data_as(P),
-                                                 wo.ctypes.data_as(P),
-                                                 lam.ctypes.data_as(P),
-                                                 out.ctypes.data_as(P))
-            return out.astype(np.float64)
-        finally:
-            self.lib.stam_brdf_free(b)
+def core_eval(material, wi, wo, lam=None):
+    """f (without cos) for directions in the core's frame, through the C ABI
+    (scripts/stam_core.py); (n, 3) RGB, or (n,) at the wavelengths lam."""
+    with stam_core.Brdf(material) as b:
+        return b.eval_rgb(wi, wo) if lam is None else b.eval_spectral(wi, wo, lam)
 
 
 def _frame_angle(cfg):
@@ -447,7 +398,6 @@ def check_slices(model, out_dir=OUT_DIR, pictures=True):
     """Mitsuba bsdf.eval / cos(theta_o) (scalar_rgb; scalar_spectral at three
     wavelengths) against the core's eval along incidence planes."""
     cfg = config(model)
-    core = Core()
     ang = _frame_angle(cfg)
     ca, sa = math.cos(ang), math.sin(ang)
 
@@ -485,10 +435,10 @@ def check_slices(model, out_dir=OUT_DIR, pictures=True):
             wi_c = np.repeat(to_core(wi), len(wo), axis=0)
             wo_c = to_core(wo)
             if variant == 'scalar_rgb':
-                cvals = core.eval(cfg['material'], wi_c, wo_c)
+                cvals = core_eval(cfg['material'], wi_c, wo_c)
                 labels = ('R', 'G', 'B')
             else:
-                cvals = np.stack([core.eval(cfg['material'], wi_c, wo_c, lam)
+                cvals = np.stack([core_eval(cfg['material'], wi_c, wo_c, lam)
                                   for lam in lams], axis=1)
                 labels = tuple('%g nm' % lam for lam in lams)
             scale = max(float(np.abs(cvals).max()), 1e-30)

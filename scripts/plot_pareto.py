@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Run time against error of the core's accuracy knobs (issue 6).
+"""Run time against error of the core's accuracy knobs.
 
 Joins the errors written by `cargo run --release -p stress --bin pareto`
 (target/pareto/errors.json) with the criterion timings of

@@ -15,6 +15,9 @@ setup(variant) does, in this order:
   * for JIT variants, switches dr.JitFlag.SymbolicLoops and SymbolicCalls off
     (evaluated mode: the plugin calls native code on concrete arrays).
 It returns the mitsuba module.
+
+Run as a script (`python scripts/stam_mitsuba.py [variant]`, default scalar_rgb)
+it loads a compact disc BSDF and prints it: a check that the plugin loads.
 """
 
 import os
@@ -95,4 +98,4 @@ def _resolver_paths(fr):
 if __name__ == '__main__':
     v = sys.argv[1] if len(sys.argv) > 1 else 'scalar_rgb'
     mi = setup(v)
-    print(mi.load_dict({'type': 'diffraction'}))
+    print(mi.load_dict({'type': 'diffraction', 'surface': 'cd'}))

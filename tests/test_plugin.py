@@ -3,13 +3,14 @@
 Patterns follow Mitsuba's own BSDF tests (src/bsdfs/tests): creation and flags,
 eval == eval_pdf[0], pdf == eval_pdf[1], chi2 of sample vs pdf, sample weight
 * pdf == eval, bs.pdf == pdf(bs.wo); plus checks against the core's C ABI
-(target/release/libstam.so through ctypes), the Beckmann limit (Mitsuba's
-roughconductor), bad parameters, and renders in every supported variant.
+(target/release/libstam.so through scripts/stam_core.py), the Beckmann limit
+(Mitsuba's roughconductor), bad parameters, and renders in every supported
+variant. The materials are those of tests/materials.json tagged `plugin` and
+`plugin-chi2`.
 
 Run: make core plugin && .venv/bin/python -m pytest tests/test_plugin.py
 """
 
-import ctypes
 import math
 import os
 import sys
@@ -19,6 +20,8 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'scripts'))
+import stam_core  # noqa: E402
+import stam_materials  # noqa: E402
 import stam_mitsuba  # noqa: E402
 
 # DRJIT_LIBLLVM_PATH must be set before drjit is imported
@@ -32,37 +35,13 @@ LLVM_VARIANTS = ['llvm_ad_rgb', 'llvm_ad_spectral', 'llvm_ad_mono']
 ALL_VARIANTS = SCALAR_VARIANTS + LLVM_VARIANTS
 
 # One configuration per surface model (core JSON names, micrometres)
-SURFACES = {
-    'gaussian': {'surface': 'gaussian', 'sigma_um': 0.1, 'corr_um': 2.0},
-    'gaussian_rough': {'surface': 'gaussian', 'sigma_um': 0.5, 'corr_um': 5.0},
-    'gaussian_aniso': {'surface': 'gaussian', 'sigma_um': 0.1,
-                       'corr_x_um': 1.0, 'corr_y_um': 4.0},
-    'fractal': {'surface': 'fractal', 'sigma_um': 0.05, 'hurst': 0.7, 'lag_um': 1.0},
-    'periodic_rect': {'surface': 'periodic', 'period_um': 2.5, 'profile': 'rect',
-                      'height_um': 0.15, 'width_um': 0.5, 'coherence_um': 5.0},
-    'periodic_sine': {'surface': 'periodic', 'period_um': 2.0, 'profile': 'sine',
-                      'height_um': 0.2, 'coherence_um': 5.0},
-    'periodic_table': {'surface': 'periodic', 'period_um': 2.0,
-                       'profile': '0, 0.05, 0.1, 0.15, 0.1, 0.05',
-                       'coherence_um': 5.0},
-    'cd': {'surface': 'cd'},
-}
+SURFACES = stam_materials.by_label('plugin')
 
 # Mitsuba's chi-square test integrates the pdf on a fixed 101 x 202 grid, so
 # the plugin-level tests use lobes several cells wide; the core's own
 # chi-square tests (rust-core/src/sampling.rs, adaptive cells) cover the
 # narrow ones, the default compact disc included.
-CHI2_SURFACES = {
-    'gaussian': {'surface': 'gaussian', 'sigma_um': 0.15, 'corr_um': 0.8},
-    'gaussian_aniso': {'surface': 'gaussian', 'sigma_um': 0.15,
-                       'corr_x_um': 0.5, 'corr_y_um': 1.5},
-    'fractal': {'surface': 'fractal', 'sigma_um': 0.1, 'hurst': 0.8, 'lag_um': 0.5},
-    'periodic_rect': {'surface': 'periodic', 'period_um': 1.0, 'profile': 'rect',
-                      'height_um': 0.15, 'width_um': 0.4, 'coherence_um': 1.5},
-    'periodic_sine': {'surface': 'periodic', 'period_um': 1.0, 'profile': 'sine',
-                      'height_um': 0.2, 'coherence_um': 1.5},
-    'cd': {'surface': 'cd', 'period_um': 1.0, 'width_um': 0.2, 'coherence_um': 1.5},
-}
+CHI2_SURFACES = stam_materials.by_label('plugin-chi2')
 
 WI_LIST = [[0.0, 0.0, 1.0],
            [0.3, 0.2, math.sqrt(1 - 0.13)],
@@ -75,9 +54,13 @@ def use(variant):
 
 def bsdf_dict(surface, **extra):
     d = {'type': 'diffraction'}
-    d.update(SURFACES[surface])
+    d.update(stam_materials.plugin_params(SURFACES[surface]))
     d.update(extra)
     return d
+
+
+def chi2_bsdf_dict(surface):
+    return {'type': 'diffraction', **stam_materials.plugin_params(CHI2_SURFACES[surface])}
 
 
 def make_si(wi, n=1, wavelengths=(450.0, 520.0, 590.0, 660.0), uv=(0.5, 0.5)):
@@ -252,8 +235,9 @@ def glossy_ctx():
 
 # Gratings at normal incidence put a sharp order-0 peak on the pole of
 # Mitsuba's spherical grid, whose fixed-grid pdf integration then reads 5-14%
-# high although the density integrates to 1 (tests/test_core_sampling.py
-# integrates it finely); they are tested here at oblique and grazing incidence.
+# high although the density integrates to 1 (the core's chi-square tests,
+# rust-core/src/sampling.rs, integrate it on adaptive cells, normal incidence
+# included); they are tested here at oblique and grazing incidence.
 CHI2_CASES = [(s, i) for s in ('gaussian', 'gaussian_aniso', 'fractal') for i in range(3)] + \
     [(s, i) for s in ('periodic_rect', 'periodic_sine', 'cd') for i in (1, 2)]
 
@@ -262,7 +246,7 @@ CHI2_CASES = [(s, i) for s in ('gaussian', 'gaussian_aniso', 'fractal') for i in
 def test07_chi2_rgb(surface, wi_index):
     wi = WI_LIST[wi_index]
     use('llvm_ad_rgb')
-    b = mi.load_dict({'type': 'diffraction', **CHI2_SURFACES[surface]})
+    b = mi.load_dict(chi2_bsdf_dict(surface))
     chi2 = chi2_test(*density_adapter(b, wi, glossy_ctx()))
     assert chi2.run(), chi2.messages
 
@@ -273,7 +257,7 @@ def test08_chi2_spectral(surface, wi_index):
     wi = WI_LIST[wi_index]
     """Sampling with a hero wavelength, pdf = mean over the four wavelengths."""
     use('llvm_ad_spectral')
-    b = mi.load_dict({'type': 'diffraction', **CHI2_SURFACES[surface]})
+    b = mi.load_dict(chi2_bsdf_dict(surface))
     chi2 = chi2_test(*density_adapter(b, wi, glossy_ctx(), (450.0, 520.0, 590.0, 660.0)))
     assert chi2.run(), chi2.messages
 
@@ -333,56 +317,21 @@ def test10_sample_weight_and_pdf_vectorized(variant):
 # The plugin forwards to the core: eval == core f * cos
 # ---------------------------------------------------------------------------
 
-def load_core():
-    path = os.environ.get('STAM_CORE_LIB',
-                          os.path.join(ROOT, 'target', 'release', 'libstam.so'))
-    lib = ctypes.CDLL(path)
-    fp = ctypes.POINTER(ctypes.c_float)
-    lib.stam_brdf_new.restype = ctypes.c_void_p
-    lib.stam_brdf_new.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t]
-    lib.stam_brdf_free.argtypes = [ctypes.c_void_p]
-    lib.stam_brdf_eval_rgb.argtypes = [ctypes.c_void_p, ctypes.c_size_t, fp, fp, fp]
-    lib.stam_brdf_eval_spectral.argtypes = [ctypes.c_void_p, ctypes.c_size_t, fp, fp, fp, fp]
-    return lib
-
-
-def core_eval(lib, params_json, wi, wo, lam=None):
-    err = ctypes.create_string_buffer(512)
-    b = lib.stam_brdf_new(params_json.encode(), err, 512)
-    assert b, err.value.decode()
-    try:
-        n = len(wo)
-        fp = ctypes.POINTER(ctypes.c_float)
-        wi_a = np.ascontiguousarray(np.tile(np.asarray(wi, np.float32), (n, 1)))
-        wo_a = np.ascontiguousarray(np.asarray(wo, np.float32))
-        if lam is None:
-            out = np.zeros((n, 3), np.float32)
-            lib.stam_brdf_eval_rgb(b, n, wi_a.ctypes.data_as(fp), wo_a.ctypes.data_as(fp),
-                                   out.ctypes.data_as(fp))
-        else:
-            out = np.zeros(n, np.float32)
-            lam_a = np.full(n, lam, np.float32)
-            lib.stam_brdf_eval_spectral(b, n, wi_a.ctypes.data_as(fp), wo_a.ctypes.data_as(fp),
-                                        lam_a.ctypes.data_as(fp), out.ctypes.data_as(fp))
-        return out
-    finally:
-        lib.stam_brdf_free(b)
-
-
-def params_json(surface):
-    import json
-    return json.dumps(SURFACES[surface])
+def core_eval(surface, wi, wo, lam=None):
+    """The core's f (without cos) through its C ABI: (n, 3) RGB, or (n,) at
+    the wavelength lam."""
+    with stam_core.Brdf(SURFACES[surface]) as b:
+        return b.eval_rgb(wi, wo) if lam is None else b.eval_spectral(wi, wo, lam)
 
 
 @pytest.mark.parametrize('surface', ['gaussian', 'gaussian_aniso', 'fractal', 'periodic_rect'])
 def test11_plugin_equals_core_times_cos(surface):
-    lib = load_core()
     use('scalar_rgb')
     b = mi.load_dict(bsdf_dict(surface))
     ctx = mi.BSDFContext()
     wo = hemisphere_dirs(50, seed=7)
     for wi in WI_LIST[:2]:
-        ref = core_eval(lib, params_json(surface), wi, wo) * wo[:, 2:3]
+        ref = core_eval(surface, wi, wo) * wo[:, 2:3]
         si = make_si(wi)
         got = np.array([to_np(b.eval(ctx, si, mi.Vector3f(d))) for d in wo])
         assert np.allclose(got, ref, rtol=1e-5, atol=1e-8)
@@ -394,14 +343,13 @@ def test11_plugin_equals_core_times_cos(surface):
     si = make_si(wi, wavelengths=lams)
     got = np.array([to_np(b.eval(ctx, si, mi.Vector3f(d))) for d in wo])
     for j, lam in enumerate(lams):
-        ref = core_eval(lib, params_json(surface), wi, wo, lam) * wo[:, 2]
+        ref = core_eval(surface, wi, wo, lam) * wo[:, 2]
         assert np.allclose(got[:, j], ref, rtol=1e-5, atol=1e-8)
 
 
 @pytest.mark.parametrize('twist', [30.0, 90.0])
 def test12_twist_rotates_the_frame(twist):
     """twist = t: the core sees directions rotated by -t about the normal."""
-    lib = load_core()
     use('scalar_rgb')
     surface = 'periodic_rect'
     b = mi.load_dict(bsdf_dict(surface, twist=twist))
@@ -413,7 +361,7 @@ def test12_twist_rotates_the_frame(twist):
         return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
     wi = WI_LIST[1]
     wo = hemisphere_dirs(40, seed=9)
-    ref = core_eval(lib, params_json(surface), rot(wi), np.array([rot(d) for d in wo]))
+    ref = core_eval(surface, rot(wi), np.array([rot(d) for d in wo]))
     ref *= wo[:, 2:3]
     si = make_si(wi)
     got = np.array([to_np(b.eval(ctx, si, mi.Vector3f(d))) for d in wo])

@@ -67,14 +67,28 @@ fuzz_target!(|data: &[u8]| {
             stam_brdf_coherent_probability(p, n, wi.as_ptr(), lam_ptr, pdf.as_mut_ptr());
             assert!(ok(&pdf) && pdf.iter().all(|&x| x <= 1.0));
         }
+        // Path-vertex calls: the combined one, then the separate eval and
+        // sample calls, which must give the same outputs bit for bit.
         for (lam_ptr, nw) in [(lam.as_ptr(), n), (std::ptr::null(), 0)] {
             let (mut f, mut s_val, mut s_wo) = (vec![0f32; 3 * n], vec![0f32; 3 * n], vec![0f32; 3]);
             let (mut p1, mut s_pdf, mut s_coh) = (0f32, 0f32, 0u8);
             stam_brdf_eval_pdf_sample_vertex(p, 1, wi.as_ptr(), wo.as_ptr(), lam_ptr, nw, rnd.as_ptr(), f.as_mut_ptr(), &mut p1, s_wo.as_mut_ptr(), &mut s_pdf, &mut s_coh, s_val.as_mut_ptr());
             assert!(ok(&f) && ok(&[p1, s_pdf]) && ok(&s_val));
+            let (mut f2, mut p2) = (vec![0f32; 3 * n], 0f32);
+            stam_brdf_eval_pdf_vertex(p, 1, wi.as_ptr(), wo.as_ptr(), lam_ptr, nw, f2.as_mut_ptr(), &mut p2);
+            let (mut v_wo, mut v_val, mut v_pdf, mut v_coh) = (vec![0f32; 3], vec![0f32; 3 * n], 0f32, 0u8);
+            stam_brdf_sample_vertex(p, 1, wi.as_ptr(), lam_ptr, nw, rnd.as_ptr(), v_wo.as_mut_ptr(), &mut v_pdf, &mut v_coh, v_val.as_mut_ptr());
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert!(bits(&f2) == bits(&f) && p2.to_bits() == p1.to_bits(), "eval_pdf_vertex differs from the combined call");
+            assert!(
+                bits(&v_wo) == bits(&s_wo) && v_pdf.to_bits() == s_pdf.to_bits() && v_coh == s_coh && bits(&v_val) == bits(&s_val),
+                "sample_vertex differs from the combined call"
+            );
         }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
+        let version = stam_version();
+        assert!(!version.is_null() && !std::ffi::CStr::from_ptr(version).to_bytes().is_empty());
         stam_brdf_free(p);
     }
 });

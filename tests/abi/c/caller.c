@@ -22,6 +22,102 @@ static int finite_nonneg(const float *v, size_t n) {
     return 1;
 }
 
+static int in_unit_interval(const float *v, size_t n) {
+    for (size_t i = 0; i < n; ++i)
+        if (!(v[i] >= 0.0f && v[i] <= 1.0f)) return 0;
+    return 1;
+}
+
+/* Deterministic uniforms in [0, 1): the high 24 bits of a 32-bit LCG. */
+static float next_uniform(uint32_t *state) {
+    *state = *state * 1664525u + 1013904223u;
+    return (float)(*state >> 8) * (1.0f / 16777216.0f);
+}
+
+/* Checks of stam_brdf_coherent_probability at the lanes wi, lambda of
+ * stam_c_caller_run (lanes 0, 1 above the horizon, 2 below, 3 NaN): a
+ * probability in [0, 1]; 0 where the BRDF is undefined; > 0 wherever the
+ * coherent lobe reflects (a delta lobe is only estimated by sampling it);
+ * 0 for materials without STAM_FLAG_HAS_COHERENT; and, at lanes 0 and 1,
+ * the probability with which stam_brdf_sample picks the coherent lobe and
+ * the pdf it reports for such samples (K samples each, spectral and RGB). */
+static int check_coherent_probability(const StamBrdf *b, const float *wi, const float *lambda,
+                                      char *report, size_t report_len) {
+    enum { N = 4, K = 1024 };
+    float p[N], p_rgb[N], refl[N], refl_rgb[3 * N];
+    stam_brdf_coherent_probability(b, N, wi, lambda, p);
+    stam_brdf_coherent_probability(b, N, wi, NULL, p_rgb);
+    CHECK(30, in_unit_interval(p, N) && in_unit_interval(p_rgb, N),
+          "coherent_probability outside [0, 1]: %g %g %g %g / RGB %g %g %g %g", p[0], p[1], p[2],
+          p[3], p_rgb[0], p_rgb[1], p_rgb[2], p_rgb[3]);
+    CHECK(31, p[2] == 0.0f && p[3] == 0.0f && p_rgb[2] == 0.0f && p_rgb[3] == 0.0f,
+          "coherent_probability not 0 below the horizon / for a NaN direction");
+    stam_brdf_coherent_spectral(b, N, wi, lambda, refl);
+    stam_brdf_coherent_rgb(b, N, wi, refl_rgb);
+    for (int i = 0; i < N; ++i) {
+        CHECK(32, !(refl[i] > 0.0f) || p[i] > 0.0f,
+              "lane %d: coherent reflectance %g but probability 0 (spectral)", i, refl[i]);
+        CHECK(32, !(refl_rgb[3 * i] + refl_rgb[3 * i + 1] + refl_rgb[3 * i + 2] > 0.0f) ||
+                      p_rgb[i] > 0.0f,
+              "lane %d: coherent reflectance but probability 0 (RGB)", i);
+    }
+    if (!(stam_brdf_flags(b) & STAM_FLAG_HAS_COHERENT))
+        CHECK(33, p[0] == 0.0f && p[1] == 0.0f && p_rgb[0] == 0.0f && p_rgb[1] == 0.0f,
+              "coherent_probability > 0 without STAM_FLAG_HAS_COHERENT");
+
+    float wi_k[3 * K], lam_k[K], rnd_k[3 * K], wo_k[3 * K], pdf_k[K], p_k[K];
+    uint8_t coh_k[K];
+    for (int lane = 0; lane < 2; ++lane) {
+        for (int rgb_mode = 0; rgb_mode < 2; ++rgb_mode) {
+            uint32_t state = 12345u + (uint32_t)(2 * lane + rgb_mode);
+            for (int k = 0; k < K; ++k) {
+                memcpy(wi_k + 3 * k, wi + 3 * lane, 3 * sizeof(float));
+                lam_k[k] = lambda[lane];
+                for (int j = 0; j < 3; ++j) rnd_k[3 * k + j] = next_uniform(&state);
+            }
+            const float *lam = rgb_mode ? NULL : lam_k;
+            stam_brdf_coherent_probability(b, K, wi_k, lam, p_k);
+            stam_brdf_sample(b, K, wi_k, lam, rnd_k, wo_k, pdf_k, coh_k);
+            const float expected = rgb_mode ? p_rgb[lane] : p[lane];
+            int drawn = 0;
+            for (int k = 0; k < K; ++k) {
+                CHECK(34, p_k[k] == expected, "coherent_probability differs between calls: %g %g",
+                      p_k[k], expected);
+                if (coh_k[k]) {
+                    ++drawn;
+                    CHECK(35, pdf_k[k] == p_k[k],
+                          "a coherent sample's pdf %g is not coherent_probability %g", pdf_k[k],
+                          p_k[k]);
+                }
+            }
+            /* The fraction of coherent samples is P within 5 standard
+             * deviations (deterministic uniforms: no flakiness), and 0 or
+             * all exactly when P is 0 or 1. */
+            const double P = expected, frac = (double)drawn / K;
+            CHECK(36, fabs(frac - P) <= 5.0 * sqrt(P * (1.0 - P) / K) + 0.5 / K,
+                  "lane %d (%s): %d of %d samples coherent, coherent_probability %g", lane,
+                  rgb_mode ? "RGB" : "spectral", drawn, K, P);
+        }
+    }
+    /* NULL material: zeros. */
+    p[0] = 1.0f;
+    stam_brdf_coherent_probability(NULL, N, wi, lambda, p);
+    CHECK(37, p[0] == 0.0f, "NULL material must give probability 0");
+    return 0;
+}
+
+/* stam_brdf_coherent_probability of the material params_json at n lanes,
+ * for the Rust side to compare with Brdf::coherent_probability. Returns 0,
+ * or -1 when the material is refused. */
+int stam_c_caller_coherent_probability(const char *params_json, size_t n, const float *wi,
+                                       const float *lambda_nm, float *out) {
+    StamBrdf *b = stam_brdf_new(params_json, NULL, 0);
+    if (b == NULL) return -1;
+    stam_brdf_coherent_probability(b, n, wi, lambda_nm, out);
+    stam_brdf_free(b);
+    return 0;
+}
+
 int stam_c_caller_run(const char *params_json, char *report, size_t report_len) {
     char err[256];
     StamBrdf *bad = stam_brdf_new("{\"surface\":\"gaussian\",\"sigma_um\":-1,\"corr_um\":1}", err, sizeof err);
@@ -70,6 +166,13 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     CHECK(16, finite_nonneg(pdf, N), "pdf");
     stam_brdf_pdf(b, N, wi, wo, NULL, pdf);
     CHECK(17, finite_nonneg(pdf, N), "RGB-mode pdf");
+    {
+        int code = check_coherent_probability(b, wi, lambda, report, report_len);
+        if (code != 0) {
+            stam_brdf_free(b);
+            return code;
+        }
+    }
 
     /* Path-vertex calls: 2 wavelengths per lane (the lanes' pairs above). */
     {

@@ -27,19 +27,90 @@ extern "C" {
         report: *mut c_char,
         report_len: usize,
     ) -> c_int;
+    fn stam_c_caller_coherent_probability(
+        params_json: *const c_char,
+        n: usize,
+        wi: *const f32,
+        lambda_nm: *const f32,
+        out: *mut f32,
+    ) -> c_int;
 }
 
 /// Runs the C caller on a material; Err carries the failed check's message.
+/// Then compares the coherent-lobe probability the C caller gets through
+/// the header with the Rust API's.
 pub fn run_c_caller(params_json: &str) -> Result<(), String> {
     let json = CString::new(params_json).unwrap();
     let mut report = vec![0 as c_char; 512];
     let code = unsafe { stam_c_caller_run(json.as_ptr(), report.as_mut_ptr(), report.len()) };
-    if code == 0 {
-        Ok(())
-    } else {
+    if code != 0 {
         let msg = unsafe { std::ffi::CStr::from_ptr(report.as_ptr()) };
-        Err(format!("check {code}: {}", msg.to_string_lossy()))
+        return Err(format!("check {code}: {}", msg.to_string_lossy()));
     }
+    coherent_probability_matches_rust(params_json)
+}
+
+/// stam_brdf_coherent_probability called from C equals
+/// Brdf::coherent_probability at the same (f32) inputs, converted as the
+/// ABI converts outputs (0 unless > 0, capped at f32::MAX).
+fn coherent_probability_matches_rust(params_json: &str) -> Result<(), String> {
+    let json = CString::new(params_json).unwrap();
+    let brdf = stam::Brdf::from_json(params_json).map_err(|e| e.message)?;
+    let wi: [[f32; 3]; 8] = [
+        [0.0, 0.0, 1.0],
+        [0.6, 0.0, 0.8],
+        [0.0, 0.6, 0.8],
+        [0.999, 0.0, 0.044_710_18],
+        [-0.3, 0.4, 0.866_025_4],
+        [0.0, 0.0, -1.0],
+        [f32::NAN, 0.0, 1.0],
+        [0.0, 0.0, 0.0],
+    ];
+    let lambda: [f32; 8] = [550.0, 450.0, 700.0, 380.0, 829.0, 550.0, 600.0, f32::NAN];
+    let n = wi.len();
+    let flat: Vec<f32> = wi.iter().flatten().copied().collect();
+    for spectral in [true, false] {
+        let lam_ptr = if spectral {
+            lambda.as_ptr()
+        } else {
+            std::ptr::null()
+        };
+        let mut out = vec![-1.0f32; n];
+        let code = unsafe {
+            stam_c_caller_coherent_probability(
+                json.as_ptr(),
+                n,
+                flat.as_ptr(),
+                lam_ptr,
+                out.as_mut_ptr(),
+            )
+        };
+        if code != 0 {
+            return Err("the C caller's material was refused".to_string());
+        }
+        for i in 0..n {
+            let w = glam::DVec3::new(wi[i][0] as f64, wi[i][1] as f64, wi[i][2] as f64);
+            let p = brdf.coherent_probability(w, spectral.then_some(lambda[i] as f64));
+            let expected = if p > 0.0 {
+                p.min(f32::MAX as f64) as f32
+            } else {
+                0.0
+            };
+            if out[i].to_bits() != expected.to_bits() {
+                return Err(format!(
+                    "coherent_probability from C {} != Rust {expected} at wi {:?}, {}",
+                    out[i],
+                    wi[i],
+                    if spectral {
+                        format!("lambda {}", lambda[i])
+                    } else {
+                        "RGB".to_string()
+                    }
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -101,6 +172,10 @@ mod tests {
             ffi::stam_brdf_pdf as unsafe extern "C" fn(_, _, _, _, _, _),
         );
         same_signature(
+            h::stam_brdf_coherent_probability as unsafe extern "C" fn(_, _, _, _, _),
+            ffi::stam_brdf_coherent_probability as unsafe extern "C" fn(_, _, _, _, _),
+        );
+        same_signature(
             h::stam_brdf_flags as unsafe extern "C" fn(_) -> _,
             ffi::stam_brdf_flags as unsafe extern "C" fn(_) -> _,
         );
@@ -120,15 +195,35 @@ mod tests {
         );
     }
 
+    /// The luminance weights the header gives renderers (bindgen turns the
+    /// float macros into f64 constants) are the ones the gamut mapping uses.
+    #[test]
+    fn header_luminance_weights_match_rust() {
+        use c_header as h;
+        let header: [f64; 3] = [
+            h::STAM_SRGB_LUMINANCE_R,
+            h::STAM_SRGB_LUMINANCE_G,
+            h::STAM_SRGB_LUMINANCE_B,
+        ];
+        assert_eq!(header, stam::brdf::SRGB_LUMINANCE);
+    }
+
+    /// The core's JSON parameters of the materials tagged `abi` in the
+    /// project's shared list of test materials, tests/materials.json.
+    fn abi_materials() -> Vec<String> {
+        let all: Vec<serde_json::Value> =
+            serde_json::from_str(include_str!("../../materials.json")).unwrap();
+        all.iter()
+            .filter(|e| e["tags"].as_array().unwrap().iter().any(|t| t == "abi"))
+            .map(|e| e["params"].to_string())
+            .collect()
+    }
+
     #[test]
     fn c_caller_exercises_every_function() {
-        for params in [
-            r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":2.0}"#,
-            r#"{"surface":"gaussian","sigma_um":0.3,"corr_x_um":1.0,"corr_y_um":20.0,"fresnel":"gold"}"#,
-            r#"{"surface":"fractal","hurst":0.6,"sigma_um":0.1,"lag_um":1.0}"#,
-            r#"{"surface":"cd"}"#,
-            r#"{"surface":"periodic","period_um":1.2,"coherence_um":30,"profile":"sine","height_um":0.2,"fresnel":0.8}"#,
-        ] {
+        let materials = abi_materials();
+        assert_eq!(materials.len(), 5);
+        for params in &materials {
             run_c_caller(params).unwrap_or_else(|e| panic!("{params}: {e}"));
         }
     }

@@ -1,6 +1,6 @@
 //! Deterministic random generators: materials spanning the accepted
-//! parameter ranges (and the extremes the issue names), directions from the
-//! ordinary to the hostile, wavelengths in and out of the band.
+//! parameter ranges (their ends included), directions from the ordinary to
+//! the hostile, wavelengths in and out of the band.
 
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -52,7 +52,7 @@ impl Rng {
 /// Hurst exponents used for random fractal materials. Each distinct alpha
 /// builds a Phi_alpha table (tens of ms); the core caches 16 of them, so
 /// random hurst values are quantised to this set (which includes the ends
-/// the issue names: near 0 and 1).
+/// of the accepted range, near 0 and 1).
 pub const HURST_SET: [f64; 10] = [1e-3, 0.01, 0.1, 0.25, 0.5, 0.7, 0.85, 0.97, 0.999, 1.0];
 
 /// Surface kinds a material generator can produce.

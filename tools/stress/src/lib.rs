@@ -10,11 +10,14 @@
 //!   `pareto` criterion bench share the list).
 //! - [`gen`]: deterministic random generators (materials, directions,
 //!   wavelengths); no external RNG so that a seed reproduces a run exactly.
+//! - [`materials`]: the project's shared list of test materials
+//!   (tests/materials.json), which the survey and the tests draw from.
 
 // `!(x <= y)` is how NaN is caught along with the out-of-range values, as in
 // the core.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod gen;
+pub mod materials;
 pub mod pareto;
 pub mod run;

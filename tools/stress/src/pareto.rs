@@ -19,6 +19,7 @@
 //! `pareto` criterion bench times the same configurations beside the
 //! Cook-Torrance baseline, scripts/plot_pareto.py joins them.
 
+use crate::materials::Material;
 use glam::DVec3;
 use stam::brdf::Surface;
 use stam::gaussian::SeriesSettings;
@@ -33,41 +34,12 @@ pub const PERIODIC_REFERENCE_STEP_NM: f64 = 0.01;
 /// Tolerance of the reference series (below the JSON range's 1e-12).
 pub const REFERENCE_SERIES_TOLERANCE: f64 = 1e-13;
 
-/// The materials surveyed: (surface model, name, JSON). The first six are
-/// benches/brdf.rs's.
-pub const MATERIALS: [(&str, &str, &str); 7] = [
-    (
-        "gaussian",
-        "gaussian_smooth",
-        r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":3.0}"#,
-    ),
-    (
-        "gaussian",
-        "gaussian_rough",
-        r#"{"surface":"gaussian","sigma_um":0.6,"corr_um":4.0}"#,
-    ),
-    (
-        "gaussian",
-        "anisotropic",
-        r#"{"surface":"gaussian","sigma_um":0.15,"corr_x_um":1.0,"corr_y_um":15.0}"#,
-    ),
-    (
-        "fractal",
-        "fractal",
-        r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.1,"lag_um":1.0}"#,
-    ),
-    (
-        "fractal",
-        "fractal_h0.3_gold",
-        r#"{"surface":"fractal","hurst":0.3,"sigma_um":0.05,"lag_um":2.0,"fresnel":"gold"}"#,
-    ),
-    ("periodic", "cd", r#"{"surface":"cd"}"#),
-    (
-        "periodic",
-        "sine_grating",
-        r#"{"surface":"periodic","period_um":1.6,"coherence_um":20,"profile":"sine","height_um":0.25}"#,
-    ),
-];
+/// The materials surveyed: those tagged `pareto` in tests/materials.json, in
+/// file order, shown by their labels (the first six are those of
+/// rust-core/benches/brdf.rs).
+pub fn materials() -> Vec<&'static Material> {
+    crate::materials::tagged("pareto")
+}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Mode {
@@ -140,7 +112,8 @@ pub fn configs() -> Vec<Config> {
     let mut out = Vec::new();
     let default_nodes = stam::params::DEFAULT_RGB_NODES;
     let default_tol = stam::gaussian::DEFAULT_SERIES_TOLERANCE;
-    for (model, material, json) in MATERIALS {
+    for m in materials() {
+        let (model, material, json) = (m.model.as_str(), m.label.as_str(), m.params.as_str());
         let mut push = |knob: String, mode: Mode, is_default: bool, json: String, series| {
             out.push(Config {
                 model,

@@ -7,11 +7,14 @@
 //! - sampling returns a unit vector above the horizon with a finite pdf > 0,
 //!   or a clean failure (pdf 0); the returned pdf equals stam_brdf_pdf at the
 //!   returned direction; pdf > 0 wherever f > 0 (an unbiased estimator needs
-//!   it); the coherent probability lies in [0, 1];
+//!   it); the coherent probability lies in [0, 1] (ABI and Rust) and is
+//!   compared like the other outputs;
 //! - the path-vertex calls (4 wavelengths with hostile ones among them, and
-//!   RGB): outputs finite and >= 0, samples sane, and a sample's pdf and
-//!   value equal to the vertex eval at the returned direction;
-//! - every refused material has a non-empty message.
+//!   RGB): outputs finite and >= 0, samples sane, a sample's pdf and value
+//!   equal to the vertex eval at the returned direction, and the separate
+//!   sample call identical to the combined call's sample;
+//! - every refused material has a non-empty message; the version string is
+//!   non-empty UTF-8.
 
 use crate::gen::{self, Rng};
 use glam::DVec3;
@@ -74,6 +77,8 @@ pub struct Report {
     pub pdf_mismatches: u64,
     pub f_positive_pdf_zero: u64,
     pub bad_coherent_probability: u64,
+    /// stam_version returned NULL, an empty string or one that is not UTF-8.
+    pub bad_version: u64,
     pub seconds: f64,
     /// The first violations, for diagnosis.
     pub examples: Vec<String>,
@@ -93,6 +98,7 @@ impl Report {
             + self.pdf_mismatches
             + self.f_positive_pdf_zero
             + self.bad_coherent_probability
+            + self.bad_version
             + self.refused_without_message
     }
 
@@ -256,6 +262,15 @@ fn build(json: &str) -> Result<Material, String> {
 pub fn run(options: &Options) -> Report {
     let start = Instant::now();
     let mut report = Report::default();
+    let version = ffi::stam_version();
+    let version_ok = !version.is_null()
+        && unsafe { std::ffi::CStr::from_ptr(version) }
+            .to_str()
+            .is_ok_and(|v| !v.trim().is_empty());
+    if !version_ok {
+        report.bad_version += 1;
+        report.fail("stam_version: NULL, empty or not UTF-8".to_string());
+    }
     let mut rng = Rng::new(options.seed);
     let mut kind = 0usize;
     let mut spectral_outputs = 0u64;
@@ -397,13 +412,18 @@ pub fn run(options: &Options) -> Report {
                 ffi::stam_brdf_coherent_probability(b, n, wi32.as_ptr(), lam_ptr, out.as_mut_ptr())
             };
             for (i, &p) in out.iter().enumerate() {
-                if !(0.0..=1.0).contains(&p) {
-                    report.bad_coherent_probability += 1;
-                    let w = ctx("coherent_probability", i)();
-                    report.fail(format!("{w}: {p}"));
+                let p64 = brdf.coherent_probability(wi_r[i], spectral.then_some(lam_r[i]));
+                for (x, path) in [(p as f64, "ABI"), (p64, "Rust")] {
+                    if !(0.0..=1.0).contains(&x) {
+                        report.bad_coherent_probability += 1;
+                        let w = ctx("coherent_probability", i)();
+                        report.fail(format!("{w}: {path} {x}"));
+                    }
                 }
+                report.compare(p, p64, ctx("coherent_probability", i));
             }
             report.evaluations_abi += n as u64;
+            report.evaluations_rust += n as u64;
         }
 
         // Sampling through the ABI, spectral and RGB mode, with the pdf at
@@ -527,8 +547,10 @@ pub fn run(options: &Options) -> Report {
         // The path-vertex ABI: 4 wavelengths per lane (the lane's own, its
         // neighbours', and every 7th lane a hostile one: 0 or NaN) and RGB.
         // Every output finite and >= 0, samples sane, and the one-call form
-        // consistent with itself: the sample's pdf and value are the eval's
-        // at the returned direction.
+        // consistent with itself and with the separate calls: the sample's
+        // pdf and value are the eval's at the returned direction, and
+        // stam_brdf_sample_vertex with the same uniforms returns the same
+        // sample.
         const NW: usize = 4;
         let lam4: Vec<f32> = (0..n * NW)
             .map(|k| match (k / NW % 7, k % NW) {
@@ -551,6 +573,12 @@ pub fn run(options: &Options) -> Report {
                 vec![0f32; n * nc],
             );
             let (mut f_at, mut pdf_at) = (vec![0f32; n * nc], vec![0f32; n]);
+            let (mut v_wo, mut v_pdf, mut v_coh, mut v_val) = (
+                vec![0f32; 3 * n],
+                vec![0f32; n],
+                vec![0u8; n],
+                vec![0f32; n * nc],
+            );
             unsafe {
                 ffi::stam_brdf_eval_pdf_sample_vertex(
                     b,
@@ -577,8 +605,20 @@ pub fn run(options: &Options) -> Report {
                     f_at.as_mut_ptr(),
                     pdf_at.as_mut_ptr(),
                 );
+                ffi::stam_brdf_sample_vertex(
+                    b,
+                    n,
+                    wi32.as_ptr(),
+                    lam_ptr,
+                    NW,
+                    rnd32.as_ptr(),
+                    v_wo.as_mut_ptr(),
+                    v_pdf.as_mut_ptr(),
+                    v_coh.as_mut_ptr(),
+                    v_val.as_mut_ptr(),
+                );
             }
-            report.evaluations_abi += (2 * nc + 3) as u64 * n as u64;
+            report.evaluations_abi += (3 * nc + 5) as u64 * n as u64;
             let label = if spectral {
                 "ABI vertex (4 wavelengths)"
             } else {
@@ -597,6 +637,24 @@ pub fn run(options: &Options) -> Report {
                     s_wo[3 * i + 2] as f64,
                 );
                 check_sample(&mut report, w, s_pdf[i] as f64, s_coh[i] != 0, 1e-5, &what);
+                // The separate sample call: bit for bit the combined call's
+                // sample (outputs already checked through it).
+                let same =
+                    |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+                let lane = |v: &[f32], k: usize| v[i * k..(i + 1) * k].to_vec();
+                if !(same(&lane(&v_wo, 3), &lane(&s_wo, 3))
+                    && same(&lane(&v_val, nc), &lane(&s_val, nc))
+                    && v_pdf[i].to_bits() == s_pdf[i].to_bits()
+                    && v_coh[i] == s_coh[i])
+                {
+                    report.pdf_mismatches += 1;
+                    let w = what();
+                    report.fail(format!(
+                        "{w}: stam_brdf_sample_vertex (wo {:?} pdf {:e} coherent {} value {:?}) differs from the combined call's sample (wo {:?} pdf {:e} coherent {} value {:?})",
+                        lane(&v_wo, 3), v_pdf[i], v_coh[i], lane(&v_val, nc),
+                        lane(&s_wo, 3), s_pdf[i], s_coh[i], lane(&s_val, nc)
+                    ));
+                }
                 if s_pdf[i] > 0.0 && s_coh[i] == 0 {
                     let (a, c) = (s_pdf[i] as f64, pdf_at[i] as f64);
                     let same_value = (0..nc).all(|c| s_val[i * nc + c] == f_at[i * nc + c]);

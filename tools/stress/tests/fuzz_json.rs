@@ -149,9 +149,13 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
             check("pdf", &pdf)?;
             stam_brdf_coherent_probability(p, n, wi.as_ptr(), lam_ptr, pdf.as_mut_ptr());
             check("coherent_probability", &pdf)?;
+            if let Some(x) = pdf.iter().find(|&&x| x > 1.0) {
+                return Err(format!("coherent_probability gave {x} > 1"));
+            }
         }
-        // The path-vertex call: the lanes' n values as one lane's
-        // wavelengths, and RGB.
+        // The path-vertex calls: the lanes' n values as one lane's
+        // wavelengths, and RGB; the combined call, then the separate eval
+        // and sample calls, which must give the same outputs.
         for (lam_ptr, nw) in [(lam.as_ptr(), n), (std::ptr::null(), 0)] {
             let mut f = vec![0f32; 3 * n];
             let mut s_val = vec![0f32; 3 * n];
@@ -181,9 +185,55 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
                     return Err(format!("vertex sample wo {s_wo:?} is not unit"));
                 }
             }
+            let mut f_sep = vec![0f32; 3 * n];
+            let mut p_sep = 0f32;
+            stam_brdf_eval_pdf_vertex(
+                p,
+                1,
+                wi.as_ptr(),
+                wo.as_ptr(),
+                lam_ptr,
+                nw,
+                f_sep.as_mut_ptr(),
+                &mut p_sep,
+            );
+            let mut v_wo = vec![0f32; 3];
+            let mut v_val = vec![0f32; 3 * n];
+            let (mut v_pdf, mut v_coh) = (0f32, 0u8);
+            stam_brdf_sample_vertex(
+                p,
+                1,
+                wi.as_ptr(),
+                lam_ptr,
+                nw,
+                rnd.as_ptr(),
+                v_wo.as_mut_ptr(),
+                &mut v_pdf,
+                &mut v_coh,
+                v_val.as_mut_ptr(),
+            );
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            if bits(&f_sep) != bits(&f) || p_sep.to_bits() != p1.to_bits() {
+                return Err(format!(
+                    "eval_pdf_vertex ({f_sep:?}, {p_sep}) differs from the combined call ({f:?}, {p1})"
+                ));
+            }
+            if bits(&v_wo) != bits(&s_wo)
+                || v_pdf.to_bits() != s_pdf.to_bits()
+                || v_coh != s_coh
+                || bits(&v_val) != bits(&s_val)
+            {
+                return Err(format!(
+                    "sample_vertex ({v_wo:?}, {v_pdf}, {v_coh}, {v_val:?}) differs from the combined call ({s_wo:?}, {s_pdf}, {s_coh}, {s_val:?})"
+                ));
+            }
         }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
+        let version = stam_version();
+        if version.is_null() || std::ffi::CStr::from_ptr(version).to_bytes().is_empty() {
+            return Err("stam_version is NULL or empty".to_string());
+        }
     }
     Ok(())
 }
@@ -378,17 +428,16 @@ fn fuzz_parameters_and_abi() {
     assert!(ACCEPTED.load(Ordering::Relaxed) > 0);
 }
 
-/// Valid materials with random float inputs: the fuzzer's "on success" path
-/// must actually be reached, not only refusals.
+/// Valid materials (those tagged `fuzz` in tests/materials.json) with random
+/// float inputs: the fuzzer's "on success" path must actually be reached, not
+/// only refusals.
 #[test]
 fn fuzz_reaches_accepted_materials() {
     let accepted_before = ACCEPTED.load(Ordering::Relaxed);
-    for json in [
-        r#"{"surface":"cd"}"#,
-        r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2}"#,
-        r#"{"surface":"fractal","hurst":0.4,"sigma_um":0.1,"lag_um":1}"#,
-    ] {
-        exercise(json, &[0.1, 0.2, 0.9, f32::NAN, 500.0, -0.3, 0.7]).unwrap();
+    let materials = stress::materials::tagged("fuzz");
+    assert_eq!(materials.len(), 3);
+    for m in &materials {
+        exercise(&m.params, &[0.1, 0.2, 0.9, f32::NAN, 500.0, -0.3, 0.7]).unwrap();
     }
     assert!(ACCEPTED.load(Ordering::Relaxed) >= accepted_before + 3);
     println!(

@@ -4,7 +4,7 @@
 //! timings come from `cargo bench -p stress --bench pareto`.
 
 use serde_json::json;
-use stress::pareto::{self, MATERIALS};
+use stress::pareto;
 
 fn main() {
     let path = std::env::args()
@@ -14,7 +14,8 @@ fn main() {
     let configs = pareto::configs();
     let mut rows = Vec::new();
     let mut convergence = Vec::new();
-    for (model, material, json) in MATERIALS {
+    for m in pareto::materials() {
+        let (model, material, json) = (m.model.as_str(), m.label.as_str(), m.params.as_str());
         let t = std::time::Instant::now();
         let reference = pareto::reference(model, json, &pairs);
         // Convergence of the reference itself: the same at half the step.
