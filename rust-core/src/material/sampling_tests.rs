@@ -178,9 +178,9 @@ fn strategy_is_a_function_of_material_wi_and_wavelength() {
 /// strategy is otherwise borrowed from its table).
 fn uncached(brdf: &Brdf, wi: DVec3, lambda_nm: Option<f64>) -> Strategy<'_> {
     match brdf.sampler(wi, lambda_nm) {
-        Strategy::Gaussian(m) => Strategy::Gaussian(m.to_local()),
-        Strategy::Fractal(m) => Strategy::Fractal(m.to_local()),
-        Strategy::Periodic(m) => Strategy::Periodic(m.to_local()),
+        Strategy::Gaussian(m) => Strategy::Gaussian(m.into_local()),
+        Strategy::Fractal(m) => Strategy::Fractal(m.into_local()),
+        Strategy::Periodic(m) => Strategy::Periodic(m.into_local()),
     }
 }
 

@@ -60,6 +60,10 @@ impl RgbRule {
         }
     }
 
+    pub fn is_empty(&self) -> bool {
+        self.k_per_um.is_empty()
+    }
+
     pub fn len(&self) -> usize {
         self.k_per_um.len()
     }

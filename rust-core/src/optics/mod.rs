@@ -4,4 +4,6 @@
 
 pub mod fresnel;
 pub mod geometry;
+/// Optical constants (eta, k) of aluminium, silver, gold, copper and chromium
+/// at 350..850 nm, generated from Mitsuba 3's data files.
 pub mod metals;

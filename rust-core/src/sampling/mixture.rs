@@ -137,7 +137,7 @@ impl<'a, L: Lobe> Mixture<'a, L> {
     /// The strategy with its components copied (a shared one can then be
     /// altered: tests).
     #[cfg(test)]
-    pub(crate) fn to_local(self) -> Self {
+    pub(crate) fn into_local(self) -> Self {
         let components = match self.components {
             Components::Shared(shared) => Components::Local(shared.iter().cloned().collect()),
             local => local,

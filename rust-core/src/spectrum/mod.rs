@@ -40,9 +40,6 @@ use std::sync::OnceLock;
 
 mod cie_tables;
 
-/// Optical constants (eta, k) of aluminium, silver, gold, copper and chromium
-/// at 350..850 nm, generated from Mitsuba 3's data files.
-
 /// Lower end of the visible band (nm). The BRDF is 0 outside the band.
 pub const LAMBDA_MIN_NM: f64 = 360.0;
 /// Upper end of the visible band (nm).

@@ -187,11 +187,11 @@ mod tests {
             h::stam_version as unsafe extern "C" fn() -> _,
             ffi::stam_version as unsafe extern "C" fn() -> _,
         );
-        assert_eq!(h::STAM_FLAG_HAS_COHERENT, stam::brdf::FLAG_HAS_COHERENT);
-        assert_eq!(h::STAM_FLAG_ANISOTROPIC, stam::brdf::FLAG_ANISOTROPIC);
+        assert_eq!(h::STAM_FLAG_HAS_COHERENT, stam::material::FLAG_HAS_COHERENT);
+        assert_eq!(h::STAM_FLAG_ANISOTROPIC, stam::material::FLAG_ANISOTROPIC);
         assert_eq!(
             h::STAM_FLAG_SPECTRALLY_VARYING,
-            stam::brdf::FLAG_SPECTRALLY_VARYING
+            stam::material::FLAG_SPECTRALLY_VARYING
         );
     }
 
@@ -205,7 +205,7 @@ mod tests {
             h::STAM_SRGB_LUMINANCE_G,
             h::STAM_SRGB_LUMINANCE_B,
         ];
-        assert_eq!(header, stam::brdf::SRGB_LUMINANCE);
+        assert_eq!(header, stam::spectrum::SRGB_LUMINANCE);
     }
 
     /// The core's JSON parameters of the materials tagged `abi` in the

@@ -54,29 +54,18 @@ impl Core {
         }
         let params = MaterialParams::from_json(json).map_err(|e| e.message)?;
         Ok(match params.surface {
-            SurfaceParams::Gaussian {
-                sigma_um,
-                corr_x_um,
-                corr_y_um,
-                anisotropic,
-            } => Core::Gaussian(if anisotropic {
-                stam::gaussian::GaussianSurface::anisotropic(sigma_um, corr_x_um, corr_y_um)
+            SurfaceParams::Gaussian(p) => Core::Gaussian(if p.anisotropic {
+                stam::gaussian::GaussianSurface::anisotropic(p.sigma_um, p.corr_x_um, p.corr_y_um)
             } else {
-                stam::gaussian::GaussianSurface::isotropic(sigma_um, corr_x_um)
+                stam::gaussian::GaussianSurface::isotropic(p.sigma_um, p.corr_x_um)
             }),
-            SurfaceParams::Fractal {
-                hurst,
-                sigma_um,
-                lag_um,
-            } => Core::Fractal(stam::fractal::FractalSurface::new(hurst, sigma_um, lag_um)?),
-            SurfaceParams::Periodic {
-                period_um,
-                coherence_um,
-                profile,
-            } => Core::Periodic(stam::periodic::PeriodicSurface::new(
-                period_um,
-                coherence_um,
-                profile,
+            SurfaceParams::Fractal(p) => Core::Fractal(stam::fractal::FractalSurface::new(
+                p.hurst, p.sigma_um, p.lag_um,
+            )?),
+            SurfaceParams::Periodic(p) => Core::Periodic(stam::periodic::PeriodicSurface::new(
+                p.period_um,
+                p.coherence_um,
+                p.profile,
             )?),
         })
     }

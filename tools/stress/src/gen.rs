@@ -186,13 +186,16 @@ pub fn material(rng: &mut Rng, kind: usize) -> String {
     if let Some(f) = fresnel(rng) {
         fields.push(format!("\"fresnel\":{f}"));
     }
-    if rng.chance(0.2) && kind <= 1 {
+    // The accuracy knobs of the surfaces that read them (Gaussian: both;
+    // fractal: the RGB rule); the others refuse them by name.
+    let surface = SURFACES[kind % SURFACES.len()];
+    if rng.chance(0.2) && matches!(surface, "gaussian" | "anisotropic") {
         fields.push(format!(
             "\"series_tolerance\":{}",
             rng.log_range(1e-12, 0.1)
         ));
     }
-    if rng.chance(0.2) {
+    if rng.chance(0.2) && matches!(surface, "gaussian" | "anisotropic" | "fractal") {
         fields.push(format!("\"rgb_nodes\":{}", rng.range(4.0, 65.0) as usize));
     }
     format!("{{{}}}", fields.join(","))

@@ -21,7 +21,6 @@
 
 use crate::materials::Material;
 use glam::DVec3;
-use stam::brdf::Surface;
 use stam::gaussian::SeriesSettings;
 use stam::Brdf;
 
@@ -75,11 +74,11 @@ impl Config {
     }
 
     pub fn build(&self) -> Brdf {
-        let mut brdf = Brdf::from_json(&self.json).expect("survey material");
-        if let (Some(series), Surface::Gaussian(s)) = (self.series, &mut brdf.surface) {
-            s.series = series;
+        let brdf = Brdf::from_json(&self.json).expect("survey material");
+        match self.series {
+            Some(series) => brdf.with_series(series),
+            None => brdf,
         }
-        brdf
     }
 
     /// The configuration's value at a pair: spectral f in channel 0, or RGB.
@@ -251,11 +250,9 @@ pub use stam::benchmark::cook_torrance_beckmann;
 
 /// The reference material of a survey material: exact series at 1e-13.
 pub fn reference_brdf(json: &str) -> Brdf {
-    let mut brdf = Brdf::from_json(json).expect("survey material");
-    if let Surface::Gaussian(s) = &mut brdf.surface {
-        s.series = exact_series(REFERENCE_SERIES_TOLERANCE);
-    }
-    brdf
+    Brdf::from_json(json)
+        .expect("survey material")
+        .with_series(exact_series(REFERENCE_SERIES_TOLERANCE))
 }
 
 /// Reference values of one material at the survey's pairs: (spectral, RGB).
@@ -277,10 +274,10 @@ pub fn reference(model: &str, json: &str, pairs: &[(DVec3, DVec3, f64)]) -> Refe
             .map(|&(wi, wo, l)| brdf.eval_spectral(wi, wo, l))
             .collect(),
         // The core maps out-of-gamut colours into the gamut at constant
-        // luminance (stam::brdf::gamut_map); so does the reference.
+        // luminance (stam::spectrum::gamut_map); so does the reference.
         rgb: pairs
             .iter()
-            .map(|&(wi, wo, _)| stam::brdf::gamut_map(brdf.eval_rgb_reference(wi, wo, step)))
+            .map(|&(wi, wo, _)| stam::spectrum::gamut_map(brdf.eval_rgb_reference(wi, wo, step)))
             .collect(),
     }
 }
@@ -309,7 +306,7 @@ pub fn error(config: &Config, pairs: &[(DVec3, DVec3, f64)], reference: &Referen
         let e = if spectral {
             (v[0] - reference.spectral[i]).abs() / s
         } else {
-            let v = stam::brdf::gamut_map(v);
+            let v = stam::spectrum::gamut_map(v);
             (0..3)
                 .map(|c| (v[c] - reference.rgb[i][c]).abs() / s)
                 .fold(0.0, f64::max)
