@@ -147,7 +147,7 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed| (concentric tracks)
 
 Only the parameters given by the user are passed to the core, which applies
-its own defaults (the ones above, from ``rust-core/src/params.rs``) and
+its own defaults (the ones above, from ``rust-core/src/models/<model>/params.rs``) and
 validates names and ranges; its error messages are raised as exceptions.
 The numeric parameters the user gives, ``twist`` always and ``center_u``,
 ``center_v`` with concentric tracks are exposed through ``mi.traverse``

@@ -305,7 +305,7 @@ def check_image(model, check, size, subpixels, out_dir=OUT_DIR, cie_step_nm=None
 
 
 def gamut_map(img):
-    """Per pixel, the core's luminance-preserving gamut mapping (brdf.rs,
+    """Per pixel, the core's luminance-preserving gamut mapping (rust-core/src/spectrum/mod.rs,
     gamut_map): desaturate towards the grey of equal luminance until the most
     negative channel reaches 0."""
     img = np.asarray(img, dtype=np.float64)
@@ -344,7 +344,7 @@ def check_cd_spectral_vs_rgb(size, subpixels, out_dir=OUT_DIR, pictures=True,
     # The spectral render's pixels are the exact projection of nearly pure
     # spectral colours, outside the sRGB gamut (negative channels); the core's
     # RGB path returns the same colours mapped into the gamut at constant
-    # luminance (rust-core/src/brdf.rs, gamut_map). Compare displayable
+    # luminance (rust-core/src/spectrum/mod.rs, gamut_map). Compare displayable
     # colours: the spectral image through the same mapping, per pixel; and
     # the luminance, which the mapping leaves exact, unmapped.
     spec_mapped = gamut_map(spec)

@@ -7,9 +7,9 @@ mitsuba 3.9.1):
     /work/main/.venv/bin/python scripts/gen_tables.py
 
 Writes
-  rust-core/src/data/cie_tables.rs  CIE 1931 2-degree CMFs and CIE D65 at 1 nm,
+  rust-core/src/spectrum/cie_tables.rs  CIE 1931 2-degree CMFs and CIE D65 at 1 nm,
                                     360..830 nm.
-  rust-core/src/data/metals.rs      complex refractive indices (eta, k) of
+  rust-core/src/optics/metals.rs        complex refractive indices (eta, k) of
                                     Al, Ag, Au, Cu, Cr from Mitsuba's data files,
                                     350..850 nm.
 
@@ -64,7 +64,7 @@ from colour.colorimetry.datasets.cmfs import DATA_CMFS_STANDARD_OBSERVER
 from colour.temperature import CCT_to_xy_CIE_D
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATA_DIR = os.path.join(ROOT, "rust-core", "src", "data")
+SRC_DIR = os.path.join(ROOT, "rust-core", "src")
 MITSUBA_IOR = os.path.join(
     os.path.dirname(sys.executable), "..", "lib", "python3.11", "site-packages",
     "mitsuba", "data", "ior",
@@ -288,9 +288,8 @@ pub const METALS: [MetalTable; 5] = [
 
 {chr(10).join(metal_blocks)}"""
 
-os.makedirs(DATA_DIR, exist_ok=True)
-for fname, text in [("cie_tables.rs", cie_rs), ("metals.rs", metals_rs)]:
-    path = os.path.join(DATA_DIR, fname)
+for fname, text in [("spectrum/cie_tables.rs", cie_rs), ("optics/metals.rs", metals_rs)]:
+    path = os.path.join(SRC_DIR, fname)
     with open(path, "w") as f:
         f.write(text.rstrip("\n") + "\n")
     print("wrote", os.path.relpath(path, ROOT))

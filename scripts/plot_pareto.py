@@ -179,7 +179,7 @@ def main():
             f"{fmt(p['midpoint_error'])} | {fmt(p['normalisation_error'])} | {p['memory_bytes']} |")
     lines += [
         "",
-        "- Diffraction orders (periodic): fixed constants in `periodic.rs` (orders kept where |c_n|^2 "
+        "- Diffraction orders (periodic): fixed constants in `models/periodic/` (orders kept where |c_n|^2 "
         "exceeds 1e-12 somewhere, spectral kernel skips orders whose Gaussian exponent exceeds the "
         "nearest's by 100, RGB skips exponents above 40 over the band, peaks wider than 0.1/um go to a "
         "32-node smooth rule). No knob; the per-order RGB integration's error and cost are the "

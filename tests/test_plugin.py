@@ -39,7 +39,7 @@ SURFACES = stam_materials.by_label('plugin')
 
 # Mitsuba's chi-square test integrates the pdf on a fixed 101 x 202 grid, so
 # the plugin-level tests use lobes several cells wide; the core's own
-# chi-square tests (rust-core/src/sampling.rs, adaptive cells) cover the
+# chi-square tests (rust-core/src/testing/chi2.rs, adaptive cells) cover the
 # narrow ones, the default compact disc included.
 CHI2_SURFACES = stam_materials.by_label('plugin-chi2')
 
@@ -236,7 +236,7 @@ def glossy_ctx():
 # Gratings at normal incidence put a sharp order-0 peak on the pole of
 # Mitsuba's spherical grid, whose fixed-grid pdf integration then reads 5-14%
 # high although the density integrates to 1 (the core's chi-square tests,
-# rust-core/src/sampling.rs, integrate it on adaptive cells, normal incidence
+# rust-core/src/testing/chi2.rs, integrate it on adaptive cells, normal incidence
 # included); they are tested here at oblique and grazing incidence.
 CHI2_CASES = [(s, i) for s in ('gaussian', 'gaussian_aniso', 'fractal') for i in range(3)] + \
     [(s, i) for s in ('periodic_rect', 'periodic_sine', 'cd') for i in (1, 2)]
