@@ -92,6 +92,7 @@ def lib():
                                                     fp, u8p, fp]),
         'stam_brdf_flags': (ctypes.c_uint32, [vp]),
         'stam_brdf_memory_bytes': (sz, [vp]),
+        'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
         'stam_version': (ctypes.c_char_p, []),
     }
     for name, (res, args) in sig.items():
@@ -175,6 +176,12 @@ class Brdf:
 
     def memory_bytes(self):
         return int(self._lib.stam_brdf_memory_bytes(self._handle()))
+
+    def warnings(self):
+        """The plausibility warnings of the parameters (stam_brdf_warnings):
+        a list of sentences, each naming its parameter; [] when none."""
+        text = self._lib.stam_brdf_warnings(self._handle()).decode()
+        return text.split('\n') if text else []
 
     # -- evaluation -------------------------------------------------------------
 

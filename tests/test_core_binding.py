@@ -297,3 +297,13 @@ def test_shared_materials_are_accepted_and_named_uniquely():
         assert e['model'] == ('periodic' if surface == 'cd' else surface), e['name']
         with stam_core.Brdf(e['params']) as b:
             assert b.memory_bytes() > 0
+
+
+def test_warnings_name_implausible_values():
+    """stam_brdf_warnings: a unit mistake (sigma in nanometres) is named,
+    a plausible material has none."""
+    with stam_core.Brdf({'surface': 'gaussian', 'sigma_um': 100, 'corr_um': 1000}) as b:
+        w = b.warnings()
+        assert len(w) == 1 and "'sigma_um'" in w[0] and 'nanometres' in w[0], w
+    with stam_core.Brdf({'surface': 'cd'}) as b:
+        assert b.warnings() == []

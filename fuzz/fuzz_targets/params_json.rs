@@ -87,6 +87,8 @@ fuzz_target!(|data: &[u8]| {
         }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
+        let warnings = stam_brdf_warnings(p);
+        assert!(!warnings.is_null() && std::ffi::CStr::from_ptr(warnings).to_str().is_ok());
         let version = stam_version();
         assert!(!version.is_null() && !std::ffi::CStr::from_ptr(version).to_bytes().is_empty());
         stam_brdf_free(p);

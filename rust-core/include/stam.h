@@ -129,6 +129,14 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 #define STAM_SRGB_LUMINANCE_G 0.7152
 #define STAM_SRGB_LUMINANCE_B 0.0722
 
+/* Plausibility warnings of the material's parameters, one per line (no
+ * trailing newline), "" when there are none or b is NULL: values that were
+ * accepted but are almost surely a unit mistake or make the model
+ * degenerate (e.g. sigma_um = 100, far into the Beckmann limit; a period
+ * too short for any diffraction order). Each line names the parameter.
+ * The string is owned by the material and lives until stam_brdf_free. */
+const char *stam_brdf_warnings(const StamBrdf *b);
+
 /* Bytes of memory the material holds (tables included; a Gaussian surface's
    RGB table once the first RGB evaluation has built it). */
 size_t stam_brdf_memory_bytes(const StamBrdf *b);

@@ -5,15 +5,19 @@
 //! into C. On a caught panic, outputs are zeroed (and construction reports
 //! the panic message).
 
+use crate::material::plausibility::warnings_for_json;
 use crate::material::Brdf;
 use crate::material::Channels;
 use glam::DVec3;
-use std::ffi::{c_char, CStr};
+use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 /// Opaque handle handed to C.
 pub struct StamBrdf {
     pub brdf: Brdf,
+    /// The plausibility warnings of its parameters, one per line
+    /// (`stam_brdf_warnings`).
+    pub warnings: CString,
 }
 
 /// f64 -> f32 for outputs: finite, non-negative, clamped to f32::MAX.
@@ -79,7 +83,8 @@ pub unsafe extern "C" fn stam_brdf_new(
     match catch_unwind(|| Brdf::from_json(text)) {
         Ok(Ok(brdf)) => {
             write_message(err, err_len, "");
-            Box::into_raw(Box::new(StamBrdf { brdf }))
+            let warnings = catch_unwind(|| warnings_text(text)).unwrap_or_default();
+            Box::into_raw(Box::new(StamBrdf { brdf, warnings }))
         }
         Ok(Err(e)) => {
             write_message(err, err_len, &e.message);
@@ -90,6 +95,15 @@ pub unsafe extern "C" fn stam_brdf_new(
             std::ptr::null_mut()
         }
     }
+}
+
+/// The warnings of accepted parameters, one per line, without NUL bytes.
+fn warnings_text(text: &str) -> CString {
+    let lines: Vec<String> = warnings_for_json(text)
+        .iter()
+        .map(|w| w.message.replace(['\n', '\0'], " "))
+        .collect();
+    CString::new(lines.join("\n")).unwrap_or_default()
 }
 
 /// # Safety
@@ -548,6 +562,16 @@ pub unsafe extern "C" fn stam_brdf_memory_bytes(b: *const StamBrdf) -> usize {
         return 0;
     }
     catch_unwind(AssertUnwindSafe(|| (*b).brdf.memory_bytes())).unwrap_or(0)
+}
+
+/// # Safety
+/// `b` NULL or valid. The string lives as long as the material.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_warnings(b: *const StamBrdf) -> *const c_char {
+    if b.is_null() {
+        return c"".as_ptr();
+    }
+    (*b).warnings.as_ptr()
 }
 
 #[no_mangle]

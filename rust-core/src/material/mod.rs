@@ -8,6 +8,7 @@
 //! vertex's queries in one call.
 
 pub mod params;
+pub mod plausibility;
 #[cfg(test)]
 mod sampling_tests;
 #[cfg(test)]

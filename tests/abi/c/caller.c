@@ -206,6 +206,20 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     CHECK(19, stam_brdf_memory_bytes(b) > 0 && stam_brdf_memory_bytes(b) <= (4u << 20), "memory");
     CHECK(20, strlen(stam_version()) > 0, "version");
 
+    /* Plausibility warnings: a unit mistake named, none for the paper's
+     * disc, "" for NULL. */
+    StamBrdf *w = stam_brdf_new("{\"surface\":\"gaussian\",\"sigma_um\":100,\"corr_um\":1000}",
+                                err, sizeof err);
+    CHECK(38, w != NULL && strstr(stam_brdf_warnings(w), "'sigma_um'") != NULL,
+          "no warning naming sigma_um for sigma_um = 100");
+    stam_brdf_free(w);
+    w = stam_brdf_new("{\"surface\":\"cd\"}", err, sizeof err);
+    CHECK(39, w != NULL && stam_brdf_warnings(w)[0] == '\0', "warnings for the paper's disc: %s",
+          w ? stam_brdf_warnings(w) : "(refused)");
+    stam_brdf_free(w);
+    CHECK(40, stam_brdf_warnings(NULL) != NULL && stam_brdf_warnings(NULL)[0] == '\0',
+          "NULL material's warnings");
+
     /* NULL material: zeros, no crash. */
     stam_brdf_eval_spectral(NULL, N, wi, wo, lambda, out);
     CHECK(21, out[0] == 0.0f, "NULL material must give 0");

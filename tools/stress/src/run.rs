@@ -14,11 +14,12 @@
 //!   equal to the vertex eval at the returned direction, and the separate
 //!   sample call identical to the combined call's sample;
 //! - every refused material has a non-empty message; the version string is
-//!   non-empty UTF-8.
+//!   non-empty UTF-8; the plausibility warnings are UTF-8 and the Rust API's.
 
 use crate::gen::{self, Rng};
 use glam::DVec3;
 use stam::ffi;
+use stam::material::plausibility::warnings_for_json;
 use std::ffi::{c_char, CString};
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -79,6 +80,11 @@ pub struct Report {
     pub bad_coherent_probability: u64,
     /// stam_version returned NULL, an empty string or one that is not UTF-8.
     pub bad_version: u64,
+    /// Materials with plausibility warnings (stam_brdf_warnings non-empty).
+    pub warned: u64,
+    /// stam_brdf_warnings returned NULL, text that is not UTF-8, or text
+    /// other than the Rust API's warnings of the same parameters.
+    pub bad_warnings: u64,
     pub seconds: f64,
     /// The first violations, for diagnosis.
     pub examples: Vec<String>,
@@ -99,6 +105,7 @@ impl Report {
             + self.f_positive_pdf_zero
             + self.bad_coherent_probability
             + self.bad_version
+            + self.bad_warnings
             + self.refused_without_message
     }
 
@@ -675,6 +682,24 @@ pub fn run(options: &Options) -> Report {
         unsafe {
             let _ = ffi::stam_brdf_flags(b);
             let _ = ffi::stam_brdf_memory_bytes(b);
+        }
+        // The warnings: UTF-8, the Rust API's, one per line.
+        let warnings = unsafe { ffi::stam_brdf_warnings(b) };
+        let expected: Vec<String> = warnings_for_json(&json)
+            .into_iter()
+            .map(|w| w.message)
+            .collect();
+        let text = (!warnings.is_null())
+            .then(|| unsafe { std::ffi::CStr::from_ptr(warnings) }.to_str().ok())
+            .flatten();
+        match text {
+            Some(t) if t == expected.join("\n") => report.warned += u64::from(!t.is_empty()),
+            _ => {
+                report.bad_warnings += 1;
+                report.fail(format!(
+                    "stam_brdf_warnings: {text:?} for {json}, the Rust API's: {expected:?}"
+                ));
+            }
         }
     }
     report.seconds = start.elapsed().as_secs_f64();

@@ -230,6 +230,10 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
         }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
+        let warnings = stam_brdf_warnings(p);
+        if warnings.is_null() || std::ffi::CStr::from_ptr(warnings).to_str().is_err() {
+            return Err("stam_brdf_warnings is NULL or not UTF-8".to_string());
+        }
         let version = stam_version();
         if version.is_null() || std::ffi::CStr::from_ptr(version).to_bytes().is_empty() {
             return Err("stam_version is NULL or empty".to_string());
