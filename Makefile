@@ -29,12 +29,14 @@ pkgdir = $(shell $(PYTHON) -c "import importlib.util as u; print(u.find_spec('$(
 MI_DIR = $(eval MI_DIR := $(call pkgdir,mitsuba))$(MI_DIR)
 DR_DIR = $(eval DR_DIR := $(call pkgdir,drjit))$(DR_DIR)
 NB_INC = $(eval NB_INC := $(shell $(PYTHON) -c "import nanobind; print(nanobind.include_dir())"))$(NB_INC)
+# Mitsuba's shape.h includes tsl/robin_map.h, which the wheel lacks and nanobind ships.
 
 # -march=haswell is REQUIRED: it matches the wheel's vector layout (docs/mitsuba.md).
 PLUGIN_CXXFLAGS = -std=c++17 -O3 -march=haswell -fPIC -fvisibility=hidden \
 	-DMI_ENABLE_LLVM=1 -DMI_ENABLE_CUDA=1 -DMI_ENABLE_EMBREE=1 -DMI_ENABLE_AUTODIFF=1 \
 	-Wall -Wextra -Wshadow \
-	-isystem $(MI_DIR)/include -isystem $(DR_DIR)/include -isystem $(NB_INC)
+	-isystem $(MI_DIR)/include -isystem $(DR_DIR)/include -isystem $(NB_INC) \
+	-isystem $(dir $(NB_INC))ext/robin_map/include
 PLUGIN_LDFLAGS = -shared -Wl,--no-undefined -Wl,--exclude-libs,ALL \
 	-L$(MI_DIR) -L$(DR_DIR) -Wl,-rpath,$(MI_DIR) -Wl,-rpath,$(DR_DIR)
 PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpthread -ldl -lm

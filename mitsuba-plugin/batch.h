@@ -148,6 +148,19 @@ struct BatchIO {
     static constexpr Channels Ch =
         IsSpectral ? Channels::Spectral : (IsMono ? Channels::Mono : Channels::Rgb);
 
+    /// JIT variants read concrete arrays: refuse symbolic recording (and
+    /// dr.freeze) with a message that says what to do.
+    static void require_evaluated_mode() {
+        if constexpr (dr::is_jit_v<Float>) {
+            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
+                Throw("diffraction: the native core needs concrete arrays, but this "
+                      "call is being recorded symbolically. Disable "
+                      "dr.JitFlag.SymbolicLoops and dr.JitFlag.SymbolicCalls "
+                      "(evaluated mode), e.g. with scripts/stam_mitsuba.py's setup(), "
+                      "and do not use dr.freeze with this BSDF.");
+        }
+    }
+
     /// Copy the inputs of a query into the batch: wi_c, wo_c (core frame),
     /// the path's wavelengths (spectral variants) and, when do_sample, the
     /// three uniforms. Scalar variants fill one lane; llvm variants evaluate
@@ -168,12 +181,7 @@ struct BatchIO {
             if (do_sample)
                 b.rnd.assign({ *sample1, sample2->x(), sample2->y() });
         } else if constexpr (dr::is_llvm_v<Float>) {
-            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
-                Throw("diffraction: the native core needs concrete arrays, but this "
-                      "call is being recorded symbolically. Disable "
-                      "dr.JitFlag.SymbolicLoops and dr.JitFlag.SymbolicCalls "
-                      "(evaluated mode), e.g. with scripts/stam_mitsuba.py's setup(), "
-                      "and do not use dr.freeze with this BSDF.");
+            require_evaluated_mode();
             stage_jit(b, wi_c, wo_c, si, sample1, sample2, do_sample, active);
         } else {
             DRJIT_MARK_USED(b); DRJIT_MARK_USED(wi_c); DRJIT_MARK_USED(wo_c);

@@ -21,11 +21,15 @@
 #include <mitsuba/core/spectrum.h>
 #include <mitsuba/render/bsdf.h>
 #include <mitsuba/render/interaction.h>
+#include <mitsuba/render/shape.h>
 
 #include <cmath>
 #include <cstdio>
+#include <mutex>
 #include <sstream>
 #include <string>
+#include <typeinfo>
+#include <unordered_map>
 #include <vector>
 
 #include "../rust-core/include/stam.h"
@@ -48,6 +52,7 @@ Diffraction BSDF (:monosp:`diffraction`)
    - Microsurface model: ``gaussian``, ``fractal``, ``periodic`` or ``cd``
      (compact disc: a periodic surface with Stam's dimensions).
      (Default: none, required)
+   - |exposed| (as a string, see below)
  * - sigma_um
    - |float|
    - Gaussian surfaces: rms height; fractal surfaces: rms height difference
@@ -62,8 +67,8 @@ Diffraction BSDF (:monosp:`diffraction`)
  * - corr_x_um, corr_y_um
    - |float|
    - Gaussian surfaces: anisotropic correlation lengths along the tangent
-     (x) and bitangent (y) (brushed metal). Micrometres, each in [1e-3, 1e5].
-     (Default: none)
+     (x, the tracks' periodic direction) and bitangent (y) (brushed metal).
+     Micrometres, each in [1e-3, 1e5]. (Default: none)
    - |exposed|
  * - hurst
    - |float|
@@ -89,10 +94,12 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed|
  * - profile
    - |string|
-   - Periodic surfaces: ``rect``, ``sine``, or a tabulated profile given as a
-     string of 2 to 65536 comma-separated heights in micrometres over one
-     period (passed to the core as ``{"heights_um": [...]}``).
-     (Default: ``cd``: ``rect``; ``periodic``: none, required)
+   - Periodic surfaces: ``rect``, ``sine``, or a tabulated profile: 2 to
+     65536 heights in micrometres, uniform over one period, written
+     ``"0, 0.1, 0.2"``, ``"[0, 0.1, 0.2]"`` or ``{"heights_um": [0, 0.1,
+     0.2]}``; finite, |h| <= 100. (Default: ``cd``: ``rect``; ``periodic``:
+     none, required)
+   - |exposed| (as a string)
  * - height_um
    - |float|
    - Periodic surfaces, ``rect`` and ``sine`` profiles: bump height (rect),
@@ -108,15 +115,17 @@ Diffraction BSDF (:monosp:`diffraction`)
  * - fresnel
    - |float| or |string|
    - Reflectance F^2 as a constant in (0, 1], or a metal with a measured
-     spectral index: ``aluminium``, ``silver``, ``gold``, ``copper``,
-     ``chromium``. (Default: ``aluminium``)
-   - |exposed| (the constant)
+     spectral index: ``aluminium`` (also ``aluminum``, ``al``), ``silver``
+     (``ag``), ``gold`` (``au``), ``copper`` (``cu``), ``chromium`` (``cr``).
+     (Default: ``aluminium``)
+   - |exposed| (a number, or a string)
  * - eta, k
    - |float|
-   - Alternative to ``fresnel``: a constant complex index of refraction
+   - Instead of ``fresnel``: a constant complex index of refraction
      eta + i k (dimensionless; eta in [1e-3, 100], k in [0, 100]; passed as
-     ``"fresnel": {"eta": .., "k": ..}``). (Default: none; k: 0 when eta is
-     given)
+     ``"fresnel": {"eta": .., "k": ..}``). ``k`` needs ``eta``; ``eta``
+     alone is a dielectric (k = 0: eta 1.5 reflects 4 % at normal
+     incidence); metals need both. (Default: none; k: 0 when eta is given)
    - |exposed|
  * - series_tolerance
    - |float|
@@ -131,32 +140,69 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed|
  * - twist
    - |float|
-   - Rotation of the tangent frame about the normal, in degrees.
+   - Rotation of the tangent frame (the tracks' periodic direction, the
+     brushing direction) about the normal, in degrees, in [-360, 360].
      (Default: 0)
    - |exposed|
  * - tracks
    - |string|
-   - ``linear`` (the periodic direction is the shading tangent) or
-     ``concentric``: the periodic direction is radial about (center_u,
-     center_v) in the uv parametrisation and the grooves follow the circles.
+   - How the tangent frame follows the shape. ``linear``: straight tracks
+     along the shape's u direction (a rectangle's or a mesh's dp/du; on a
+     ``disk``, whose uv is polar, its object x axis). ``concentric``: circular
+     tracks about a centre, the periodic direction radial (a compact disc):
+     on a ``disk`` about the point (2 center_u - 1, 2 center_v - 1) of its
+     object space (its centre by default), on other shapes about (center_u,
+     center_v) in uv space (a rectangle's centre by default; exact for any
+     planar uv map, first order on curved ones). A mesh without texture
+     coordinates defines neither: rendering it raises an error (for
+     anisotropic materials; isotropic ones ignore the frame).
      (Default: ``linear``)
+   - |exposed| (as a string)
  * - center_u, center_v
    - |float|
-   - Centre of concentric tracks in uv space (uv units; only with
-     ``tracks`` = ``concentric``). (Default: 0.5, 0.5)
+   - Centre of concentric tracks, in uv units (only with ``tracks`` =
+     ``concentric``): (0.5, 0.5) is the middle of a rectangle, a disk and a
+     mesh whose uv covers the unit square. (Default: 0.5, 0.5)
    - |exposed| (concentric tracks)
 
 Only the parameters given by the user are passed to the core, which applies
 its own defaults (the ones above, from ``rust-core/src/models/<model>/params.rs``) and
-validates names and ranges; its error messages are raised as exceptions.
-The numeric parameters the user gives, ``twist`` always and ``center_u``,
-``center_v`` with concentric tracks are exposed through ``mi.traverse``
-(non-differentiable); changing them rebuilds the core material. ``docs/parameters.md`` has the
-same table for the core's JSON keys.
+validates names and ranges; its error messages are raised as exceptions
+naming the parameter (an unknown key's message lists every accepted key, the
+plugin's own included, and the closest one). ``docs/parameters.md`` has the
+same table for the core's JSON keys; ``docs/guide.md`` says what each
+parameter does to the look and gives values of real objects.
+
+Values that are accepted but almost surely a unit mistake or a degenerate
+model (e.g. ``sigma_um`` = 100 meant as nanometres, far into the Beckmann
+limit; a grating period that lets no diffraction order out) are reported as
+warnings in Mitsuba's log, once per material (the core's
+``stam_brdf_warnings``), and listed in the object's string form.
+
+The parameters the user gives, ``twist`` and ``tracks`` always and
+``center_u``, ``center_v`` with concentric tracks are exposed through
+``mi.traverse`` (non-differentiable). Mitsuba's traversal carries numbers
+and registered types but no strings, so the string parameters travel as a
+``mi.Properties`` whose plugin name is the value: ``params['fresnel'] =
+'gold'`` works (Mitsuba converts the string), and
+``params['fresnel'].plugin_name()`` reads it. ``params.update()`` rebuilds
+the core material; a refused update raises, naming the parameter, and
+leaves the material exactly as it was (values, frame and core), so later
+updates work. An update may not add or remove the coherent lobe (the
+component layout is fixed at construction).
 
 Components: 0 = the diffracted (glossy) lobe; 1 = the coherent mirror lobe
 (a delta component, present when the core reports one, e.g. Gaussian
 surfaces).
+
+The BSDF is one-sided, like Mitsuba's conductors: it reflects light arriving
+on the side the normal points to and is black from behind; wrap it in
+``twosided`` for sheets seen from both sides. Polarized variants run but
+depolarize (Stam's model is scalar): the result is the unpolarized value
+times a depolarizer. RGB variants receive the core's D65-weighted linear
+sRGB integral; colours purer than the sRGB primaries (the nearly
+monochromatic orders of gratings) are desaturated into the gamut at
+constant luminance, so RGB renders of gratings are paler than spectral ones.
 
 In spectral variants the BSDF is evaluated at the path's wavelengths. The
 core samples a direction with one of them (the hero), chosen uniformly by the
@@ -174,18 +220,20 @@ False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
 .. tabs::
     .. code-tab:: xml
 
-        <bsdf type="diffraction">
-            <string name="surface" value="cd"/>
-            <string name="tracks" value="concentric"/>
-            <string name="fresnel" value="aluminium"/>
-        </bsdf>
+        <shape type="disk">
+            <bsdf type="diffraction">
+                <string name="surface" value="cd"/>
+                <string name="tracks" value="concentric"/>
+                <string name="fresnel" value="aluminium"/>
+            </bsdf>
+        </shape>
 
     .. code-tab:: python
 
         'type': 'diffraction',
         'surface': 'gaussian',
-        'sigma_um': 0.2,
-        'corr_um': 2.0,
+        'sigma_um': 0.03,
+        'corr_um': 1.0,
         'fresnel': 'gold'
 */
 
@@ -193,21 +241,31 @@ False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
 using diffraction_detail::Batch;
 using diffraction_detail::BatchIO;
 using diffraction_detail::CorePtr;
+using diffraction_detail::excerpt;
 using diffraction_detail::json_escape;
 using diffraction_detail::json_number;
-using diffraction_detail::parse_number_list;
+using diffraction_detail::ParamError;
+using diffraction_detail::parse_profile_heights;
 using diffraction_detail::run_batch;
 using diffraction_detail::Scratch;
+using diffraction_detail::with_plugin_keys;
 
 template <typename Float, typename Spectrum>
 class Diffraction final : public BSDF<Float, Spectrum> {
 public:
     MI_IMPORT_BASE(BSDF, m_flags, m_components)
-    MI_IMPORT_TYPES()
+    MI_IMPORT_TYPES(Shape)
 
     enum class Tracks { Linear, Concentric };
 
     using IO = BatchIO<Float, Spectrum>;
+
+    /// The plugin's own keys, which the core does not know (for messages).
+    static const std::vector<std::string> &plugin_keys() {
+        static const std::vector<std::string> keys = { "eta",      "k",        "twist",
+                                                       "tracks",   "center_u", "center_v" };
+        return keys;
+    }
 
     Diffraction(const Properties &props) : Base(props) {
         if constexpr (dr::is_cuda_v<Float>)
@@ -223,82 +281,71 @@ public:
             ++count;
         m_params.reserve(count); // never reallocated: traverse() hands out pointers
 
-        bool has_center = false;
-        for (auto it = props.begin(); it != props.end(); ++it) {
-            std::string name(it->name());
-            using PType = Properties::Type;
-            PType type = it->type();
+        try {
+            bool has_center = false;
+            for (auto it = props.begin(); it != props.end(); ++it) {
+                std::string name(it->name());
+                using PType = Properties::Type;
+                PType type = it->type();
 
-            if (name == "twist") {
-                m_twist = (ScalarFloat) it->template get<double>();
-            } else if (name == "tracks") {
-                std::string t = it->template get<std::string>();
-                if (t == "linear")
-                    m_tracks = Tracks::Linear;
-                else if (t == "concentric")
-                    m_tracks = Tracks::Concentric;
-                else
-                    Throw("diffraction: tracks = \"%s\": must be \"linear\" or "
-                          "\"concentric\"", t);
-            } else if (name == "center_u") {
-                m_center_u = (ScalarFloat) it->template get<double>();
-                has_center = true;
-            } else if (name == "center_v") {
-                m_center_v = (ScalarFloat) it->template get<double>();
-                has_center = true;
-            } else if (type == PType::Float || type == PType::Integer) {
-                double v = it->template get<double>();
-                Param p;
-                p.name = name;
-                p.kind = Param::Number;
-                p.given = v;
-                p.value = (ScalarFloat) v;
-                // eta, k: nested under "fresnel"
-                if (name == "eta" || name == "k")
-                    p.group = "fresnel";
-                m_params.push_back(p);
-            } else if (type == PType::String) {
-                std::string s = it->template get<std::string>();
-                Param p;
-                p.name = name;
-                std::vector<double> heights;
-                if (name == "profile" && s != "rect" && s != "sine" &&
-                    parse_number_list(s, heights)) {
-                    p.kind = Param::Json;
-                    std::string j = "{\"heights_um\": [";
-                    for (size_t i = 0; i < heights.size(); ++i)
-                        j += (i ? ", " : "") + json_number(heights[i]);
-                    p.text = j + "]}";
+                if (name == "twist") {
+                    m_twist = (ScalarFloat) it->template get<double>();
+                } else if (name == "tracks") {
+                    set_tracks(it->template get<std::string>());
+                } else if (name == "center_u") {
+                    m_center_u = (ScalarFloat) it->template get<double>();
+                    has_center = true;
+                } else if (name == "center_v") {
+                    m_center_v = (ScalarFloat) it->template get<double>();
+                    has_center = true;
+                } else if (type == PType::Float || type == PType::Integer) {
+                    double v = it->template get<double>();
+                    Param p;
+                    p.name = name;
+                    p.kind = Param::Number;
+                    p.given = v;
+                    p.value = (ScalarFloat) v;
+                    // eta, k: nested under "fresnel"
+                    if (name == "eta" || name == "k")
+                        p.group = "fresnel";
+                    m_params.push_back(p);
+                } else if (type == PType::String) {
+                    Param p;
+                    p.name = name;
+                    set_text(p, it->template get<std::string>());
+                    m_params.push_back(p);
+                } else if (type == PType::Bool) {
+                    Param p;
+                    p.name = name;
+                    p.kind = Param::Bool;
+                    p.text = it->template get<bool>() ? "true" : "false";
+                    m_params.push_back(p);
                 } else {
-                    p.kind = Param::String;
-                    p.text = s;
+                    throw ParamError("parameter '" + name + "' has type " +
+                                     std::string(property_type_name(type)) +
+                                     "; only numbers and strings are accepted (no textures)");
                 }
-                m_params.push_back(p);
-            } else if (type == PType::Bool) {
-                Param p;
-                p.name = name;
-                p.kind = Param::Bool;
-                p.text = it->template get<bool>() ? "true" : "false";
-                m_params.push_back(p);
-            } else {
-                Throw("diffraction: parameter \"%s\" has type %s; only numbers "
-                      "and strings are accepted (no textures)",
-                      name, property_type_name(type));
             }
-        }
+            if (has_center && m_tracks != Tracks::Concentric)
+                throw ParamError("parameters 'center_u' and 'center_v' only apply to "
+                                 "tracks = \"concentric\"");
+            bool has_fresnel = false, has_eta = false, has_k = false;
+            for (const Param &p : m_params) {
+                has_fresnel |= p.name == "fresnel";
+                has_eta |= p.name == "eta";
+                has_k |= p.name == "k";
+            }
+            if (has_fresnel && (has_eta || has_k))
+                throw ParamError("give either 'fresnel' or 'eta'/'k', not both");
+            if (has_k && !has_eta)
+                throw ParamError("parameter 'k' needs 'eta' (the complex index eta + i k; "
+                                 "eta in [0.001, 100])");
 
-        if (has_center && m_tracks != Tracks::Concentric)
-            Throw("diffraction: center_u/center_v only apply to "
-                  "tracks=\"concentric\"");
-        bool has_fresnel = false, has_eta_k = false;
-        for (const Param &p : m_params) {
-            has_fresnel |= p.name == "fresnel";
-            has_eta_k |= p.group == "fresnel";
+            check_frame();
+            commit(build_core());
+        } catch (const ParamError &e) {
+            Throw("diffraction: %s", e.what());
         }
-        if (has_fresnel && has_eta_k)
-            Throw("diffraction: give either \"fresnel\" or \"eta\"/\"k\", not both");
-
-        rebuild_core();
 
         // Flags and components, declared once
         m_has_coherent = (m_core_flags & STAM_FLAG_HAS_COHERENT) != 0;
@@ -313,31 +360,60 @@ public:
         m_flags = 0;
         for (uint32_t c : m_components)
             m_flags |= c;
+        m_saved = snapshot();
+        log_warnings();
     }
 
     void traverse(TraversalCallback *cb) override {
         Base::traverse(cb);
-        for (Param &p : m_params)
+        for (Param &p : m_params) {
             if (p.kind == Param::Number)
                 cb->put(p.name, p.value, ParamFlags::NonDifferentiable);
+            else if (p.kind == Param::String || p.kind == Param::Json)
+                cb->put(p.name, p.holder, ParamFlags::NonDifferentiable);
+        }
         cb->put("twist", m_twist, ParamFlags::NonDifferentiable);
+        cb->put("tracks", m_tracks_holder, ParamFlags::NonDifferentiable);
         if (m_tracks == Tracks::Concentric) {
             cb->put("center_u", m_center_u, ParamFlags::NonDifferentiable);
             cb->put("center_v", m_center_v, ParamFlags::NonDifferentiable);
         }
     }
 
+    /// Transactional: either every change is taken and the core rebuilt, or
+    /// the material keeps exactly its previous parameters, frame and core,
+    /// and the exception says why.
     void parameters_changed(const std::vector<std::string> &keys) override {
         Base::parameters_changed(keys);
-        rebuild_core();
-        if (((m_core_flags & STAM_FLAG_HAS_COHERENT) != 0) != m_has_coherent)
-            Throw("diffraction: the change adds or removes the coherent lobe; "
-                  "the component layout is fixed at construction");
-        // Anisotropy is a hint to integrators: follow the core
-        if (m_core_flags & STAM_FLAG_ANISOTROPIC) {
+        try {
+            // Strings arrive as the plugin name of their Properties holder
+            for (Param &p : m_params)
+                if ((p.kind == Param::String || p.kind == Param::Json) &&
+                    std::string(p.holder.plugin_name()) != p.source)
+                    set_text(p, std::string(p.holder.plugin_name()));
+            if (std::string(m_tracks_holder.plugin_name()) != tracks_name(m_tracks))
+                set_tracks(std::string(m_tracks_holder.plugin_name()));
+            check_frame();
+            Core core = build_core();
+            if (((core.flags & STAM_FLAG_HAS_COHERENT) != 0) != m_has_coherent)
+                throw ParamError(std::string("the change ") +
+                                 (m_has_coherent ? "removes" : "adds") +
+                                 " the coherent lobe; the component layout is fixed at "
+                                 "construction (create a new BSDF instead)");
+            commit(std::move(core));
+        } catch (const std::exception &e) {
+            restore(m_saved);
+            Throw("diffraction: update refused, the material keeps its previous "
+                  "parameters: %s", e.what());
+        }
+        m_saved = snapshot();
+        // Anisotropy is a hint to integrators: follow the core and the frame
+        if ((m_core_flags & STAM_FLAG_ANISOTROPIC) || m_twist != 0.f ||
+            m_tracks == Tracks::Concentric) {
             m_components[0] |= +BSDFFlags::Anisotropic;
             m_flags |= +BSDFFlags::Anisotropic;
         }
+        log_warnings();
     }
 
     // -----------------------------------------------------------------------
@@ -400,15 +476,17 @@ public:
             oss << "," << std::endl;
         }
         oss << "  twist = " << m_twist << "," << std::endl
-            << "  tracks = " << (m_tracks == Tracks::Linear ? "linear" : "concentric");
+            << "  tracks = " << tracks_name(m_tracks);
         if (m_tracks == Tracks::Concentric)
             oss << "," << std::endl
                 << "  center_u = " << m_center_u << "," << std::endl
                 << "  center_v = " << m_center_v;
         oss << "," << std::endl
             << "  core_json = " << m_json << "," << std::endl
-            << "  coherent_lobe = " << (m_has_coherent ? "true" : "false") << std::endl
-            << "]";
+            << "  coherent_lobe = " << (m_has_coherent ? "true" : "false");
+        if (!m_warnings.empty())
+            oss << "," << std::endl << "  warnings = " << json_escape(m_warnings);
+        oss << std::endl << "]";
         return oss.str();
     }
 
@@ -423,6 +501,26 @@ private:
         double given = 0.0; // number as given by the user
         ScalarFloat value = 0.f; // number as exposed by traverse()
         std::string text;   // string value, or raw JSON
+        std::string source; // String, Json: the user's string
+        /// String, Json: the user's string as the plugin name of a
+        /// Properties, the registered type that carries it through
+        /// mi.traverse (which has no strings)
+        Properties holder;
+    };
+
+    /// What parameters_changed restores when it refuses an update
+    struct State {
+        std::vector<Param> params;
+        ScalarFloat twist = 0.f, center_u = 0.5f, center_v = 0.5f;
+        Tracks tracks = Tracks::Linear;
+    };
+
+    /// A core material built from the current parameters, not yet in use
+    struct Core {
+        CorePtr ptr;
+        std::string json;
+        uint32_t flags = 0;
+        std::string warnings;
     };
 
     /// Everything one call can ask of the core, in the local frame
@@ -432,6 +530,71 @@ private:
         BSDFSample3f bs;
         UnpolarizedSpectrum weight; // sample weight
     };
+
+    /// How a shape defines the tracks (see frame_rotation)
+    enum ShapeKind : uint32_t {
+        UvShape = 0,     // uv parametrisation (rectangle, meshes with uv, ...; or no shape)
+        PolarDisk = 1,   // Mitsuba's disk: u = radius, v = angle / 2 pi
+        MeshWithoutUv = 2
+    };
+
+    static const char *tracks_name(Tracks t) {
+        return t == Tracks::Linear ? "linear" : "concentric";
+    }
+
+    void set_tracks(const std::string &t) {
+        if (t == "linear")
+            m_tracks = Tracks::Linear;
+        else if (t == "concentric")
+            m_tracks = Tracks::Concentric;
+        else
+            throw ParamError("parameter 'tracks' = \"" + excerpt(t) +
+                             "\": must be \"linear\" or \"concentric\"");
+        m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
+    }
+
+    /// A string parameter's kind and core text from the user's string
+    static void set_text(Param &p, const std::string &s) {
+        std::vector<double> heights;
+        if (p.name == "profile" && s != "rect" && s != "sine" &&
+            parse_profile_heights(s, heights)) {
+            p.kind = Param::Json;
+            std::string j = "{\"heights_um\": [";
+            for (size_t i = 0; i < heights.size(); ++i)
+                j += (i ? ", " : "") + json_number(heights[i]);
+            p.text = j + "]}";
+        } else {
+            p.kind = Param::String;
+            p.text = s;
+        }
+        p.source = s;
+        p.holder.set_plugin_name(s);
+    }
+
+    /// The plugin's frame parameters: finite, twist within a turn
+    void check_frame() const {
+        if (!std::isfinite(m_twist) || std::abs(m_twist) > 360.f)
+            throw ParamError("parameter 'twist' = " + json_number((double) m_twist) +
+                             " is out of range: accepted [-360, 360] degrees");
+        if (!std::isfinite(m_center_u) || !std::isfinite(m_center_v))
+            throw ParamError("parameters 'center_u' and 'center_v' must be finite");
+    }
+
+    State snapshot() const {
+        return State{ m_params, m_twist, m_center_u, m_center_v, m_tracks };
+    }
+
+    /// Back to a snapshot, in place: traverse() handed out pointers into
+    /// m_params, so its elements are assigned, never reallocated.
+    void restore(const State &s) {
+        for (size_t i = 0; i < m_params.size() && i < s.params.size(); ++i)
+            m_params[i] = s.params[i];
+        m_twist = s.twist;
+        m_center_u = s.center_u;
+        m_center_v = s.center_v;
+        m_tracks = s.tracks;
+        m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
+    }
 
     std::string number_text(const Param &p) const {
         // The user's value unless traverse() changed it
@@ -449,7 +612,7 @@ private:
             switch (p.kind) {
                 case Param::Number:
                     if (!std::isfinite(p.value))
-                        Throw("diffraction: parameter \"%s\" must be finite", p.name);
+                        throw ParamError("parameter '" + p.name + "' must be finite");
                     v = number_text(p);
                     break;
                 case Param::String: v = json_escape(p.text); break;
@@ -464,38 +627,169 @@ private:
         return "{" + top + "}";
     }
 
-    void rebuild_core() {
-        if (!std::isfinite(m_twist) || !std::isfinite(m_center_u) ||
-            !std::isfinite(m_center_v))
-            Throw("diffraction: twist, center_u and center_v must be finite");
-        std::string json = build_json();
-        char err[1024] = { 0 };
-        StamBrdf *core = stam_brdf_new(json.c_str(), err, sizeof(err));
-        if (!core)
-            Throw("diffraction: %s", err[0] ? err : "the core refused the parameters");
-        m_core.reset(core);
-        m_json = std::move(json);
-        m_core_flags = stam_brdf_flags(core);
+    /// A core material from the current parameters; throws ParamError with
+    /// the core's message (completed with the plugin's keys) when refused.
+    Core build_core() const {
+        Core c;
+        c.json = build_json();
+        char err[4096] = { 0 };
+        c.ptr.reset(stam_brdf_new(c.json.c_str(), err, sizeof(err)));
+        if (!c.ptr)
+            throw ParamError(with_plugin_keys(
+                err[0] ? err : "the core refused the parameters", plugin_keys()));
+        c.flags = stam_brdf_flags(c.ptr.get());
+        c.warnings = stam_brdf_warnings(c.ptr.get());
+        return c;
+    }
+
+    void commit(Core &&c) {
+        m_core = std::move(c.ptr);
+        m_json = std::move(c.json);
+        m_core_flags = c.flags;
+        m_pending_warnings = std::move(c.warnings);
         double t = (double) m_twist * M_PI / 180.0;
         m_cos_twist = (ScalarFloat) std::cos(t);
         m_sin_twist = (ScalarFloat) std::sin(t);
     }
 
-    /// Rotation (c, s) of the core's tangent in the local (xy) plane: core
-    /// x = (c, s, 0), core y = (-s, c, 0).
-    std::pair<Float, Float> frame_rotation(const SurfaceInteraction3f &si) const {
-        if (m_tracks == Tracks::Linear)
+    /// The core's plausibility warnings, logged once per material (again
+    /// only when an update changes them)
+    void log_warnings() {
+        if (m_pending_warnings == m_warnings)
+            return;
+        m_warnings = m_pending_warnings;
+        size_t pos = 0;
+        while (pos < m_warnings.size()) {
+            size_t nl = m_warnings.find('\n', pos);
+            if (nl == std::string::npos)
+                nl = m_warnings.size();
+            Log(Warn, "diffraction: %s", m_warnings.substr(pos, nl - pos));
+            pos = nl + 1;
+        }
+    }
+
+    /// Reads the width of a mesh's texture coordinate buffer from its
+    /// traverse() (mesh.h, whose accessors would tell, needs headers the
+    /// wheel lacks).
+    struct TexcoordProbe : TraversalCallback {
+        // Mesh<Float, Spectrum>::FloatStorage (InputFloat is float)
+        using FloatStorage = DynamicBuffer<dr::replace_scalar_t<Float, float>>;
+        size_t width = 0;
+        bool seen = false;
+        void put_value(std::string_view name, void *value, uint32_t,
+                       const std::type_info &type) override {
+            if (name == "vertex_texcoords" && type == typeid(FloatStorage)) {
+                width = dr::width(*(const FloatStorage *) value);
+                seen = true;
+            }
+        }
+        void put_object(std::string_view, Object *, uint32_t) override { }
+    };
+
+    /// How one shape defines the tracks; cached per shape (a shape's kind
+    /// does not change).
+    static uint32_t shape_kind(const Shape *shape) {
+        if (!shape)
+            return UvShape;
+        static thread_local std::pair<const Shape *, uint32_t> last{ nullptr, UvShape };
+        if (last.first == shape)
+            return last.second;
+        static std::mutex mutex;
+        static std::unordered_map<const Shape *, uint32_t> known;
+        std::lock_guard<std::mutex> guard(mutex);
+        auto it = known.find(shape);
+        uint32_t kind = UvShape;
+        if (it != known.end()) {
+            kind = it->second;
+        } else {
+            uint32_t type = shape->shape_type();
+            if (type == +ShapeType::Disk) {
+                kind = PolarDisk;
+            } else if (type == +ShapeType::Mesh) {
+                TexcoordProbe probe;
+                const_cast<Shape *>(shape)->traverse(&probe);
+                if (probe.seen && probe.width == 0)
+                    kind = MeshWithoutUv;
+            }
+            known.emplace(shape, kind);
+        }
+        last = { shape, kind };
+        return kind;
+    }
+
+    /// How the shape of each lane defines the tracks. Throws for a mesh
+    /// without texture coordinates (active lanes only).
+    UInt32 shape_kinds(const SurfaceInteraction3f &si, Mask active) const {
+        std::string bad_mesh;
+        auto kind_of = [&bad_mesh](const Shape *shape) -> uint32_t {
+            uint32_t kind = shape_kind(shape);
+            if (kind == MeshWithoutUv)
+                bad_mesh = shape->id();
+            return kind;
+        };
+        UInt32 kind;
+        if constexpr (dr::is_jit_v<Float>) {
+            IO::require_evaluated_mode();
+            kind = dr::dispatch(
+                si.shape,
+                [&kind_of](const Shape *shape, Mask lanes) {
+                    return dr::select(lanes, UInt32(kind_of(shape)), UInt32(0u));
+                },
+                active);
+        } else {
+            kind = active ? kind_of(si.shape) : (uint32_t) UvShape;
+        }
+        if (dr::any(active && kind == (uint32_t) MeshWithoutUv))
+            Throw("diffraction: tracks = \"%s\" on a mesh without texture coordinates%s: "
+                  "the tracks' direction is defined through the uv parametrisation "
+                  "(linear tracks follow dp/du, concentric ones circle a uv centre), "
+                  "which such a mesh lacks (Mitsuba gives each triangle its own). Give "
+                  "the mesh uv coordinates, or use a disk or rectangle shape.",
+                  tracks_name(m_tracks), bad_mesh.empty() ? "" : " (\"" + bad_mesh + "\")");
+        return kind;
+    }
+
+    /// Rotation (c, s) of the core's tangent (the periodic direction of
+    /// gratings, the x correlation length) in the local (xy) plane: core
+    /// x = (c, s, 0), core y = (-s, c, 0). Then `twist`.
+    std::pair<Float, Float> frame_rotation(const SurfaceInteraction3f &si, Mask active) const {
+        // An isotropic core gives the same values in any frame
+        if (!(m_core_flags & STAM_FLAG_ANISOTROPIC))
+            return { Float(1.f), Float(0.f) };
+        UInt32 kind = shape_kinds(si, active);
+        Mask disk = kind == (uint32_t) PolarDisk;
+        const bool linear = m_tracks == Tracks::Linear;
+        if (linear && dr::none_or<false>(disk && active))
             return { Float(m_cos_twist), Float(m_sin_twist) };
-        // Groove direction: tangent of the circle |uv - centre| = const,
-        // mapped to the surface by (dp_du, dp_dv); periodic direction = groove x n.
-        Float du = si.uv.x() - m_center_u, dv = si.uv.y() - m_center_v;
-        Vector3f g = si.sh_frame.to_local(si.dp_du * (-dv) + si.dp_dv * du);
-        Float len = dr::sqrt(dr::square(g.x()) + dr::square(g.y()));
+
+        // A disk's uv is polar: u = r, v = phi / 2 pi, dp_du = M e_r and
+        // dp_dv = 2 pi r M e_phi (M: its to_world); its object point is
+        // (r cos phi, r sin phi).
+        Float r = si.uv.x();
+        auto [sin_phi, cos_phi] = dr::sincos(dr::TwoPi<Float> * si.uv.y());
+        Vector3f m_e_phi = si.dp_dv * dr::select(r > 1e-7f, dr::rcp(dr::TwoPi<Float> * r), 0.f);
+        Vector3f dir;
+        if (linear) {
+            // Generic: the shading tangent; disk: its object x axis
+            Vector3f disk_x = si.dp_du * cos_phi - m_e_phi * sin_phi;
+            dir = dr::select(disk, si.sh_frame.to_local(disk_x), Vector3f(1.f, 0.f, 0.f));
+        } else {
+            // Radial: from the centre to the point. Generic: the displacement
+            // dp_du du + dp_dv dv (exact for planar uv maps); disk: M (P - C)
+            // with C = (2 center_u - 1, 2 center_v - 1) in object units.
+            Float cx = 2.f * m_center_u - 1.f, cy = 2.f * m_center_v - 1.f;
+            Float c_r = cx * cos_phi + cy * sin_phi, c_phi = cy * cos_phi - cx * sin_phi;
+            Vector3f disk_r = si.dp_du * (r - c_r) - m_e_phi * c_phi;
+            Vector3f uv_r = si.dp_du * (si.uv.x() - m_center_u) +
+                            si.dp_dv * (si.uv.y() - m_center_v);
+            dir = si.sh_frame.to_local(dr::select(disk, disk_r, uv_r));
+        }
+        Float len = dr::sqrt(dr::square(dir.x()) + dr::square(dir.y()));
         Mask ok = len > 1e-20f && dr::isfinite(len);
         Float inv = dr::select(ok, dr::rcp(len), 0.f);
-        // Degenerate (centre, or no uv parametrisation): the shading tangent
-        Float c0 = dr::select(ok, g.y() * inv, 1.f),
-              s0 = dr::select(ok, -g.x() * inv, 0.f);
+        // Degenerate (the centre, no uv derivatives): the shading tangent
+        Float c0 = dr::select(ok, dir.x() * inv, 1.f),
+              s0 = dr::select(ok, dir.y() * inv, 0.f);
         return { c0 * m_cos_twist - s0 * m_sin_twist,
                  s0 * m_cos_twist + c0 * m_sin_twist };
     }
@@ -532,7 +826,7 @@ private:
         if (dr::none_or<false>(active_e || active_s))
             return q;
 
-        auto [c, s] = frame_rotation(si);
+        auto [c, s] = frame_rotation(si, active_e || active_s);
         Vector3f wi_c = to_core(si.wi, c, s);
         Vector3f wo_c = do_eval ? to_core(*wo, c, s) : Vector3f(0.f, 0.f, 1.f);
         // Lanes outside the hemisphere: a below-horizon wi makes the core return 0
@@ -610,13 +904,16 @@ private:
     std::vector<Param> m_params;
     ScalarFloat m_twist = 0.f;
     Tracks m_tracks = Tracks::Linear;
+    Properties m_tracks_holder{ "linear" }; // `tracks` through mi.traverse
     ScalarFloat m_center_u = 0.5f, m_center_v = 0.5f;
+    State m_saved;                          // the last accepted parameters
 
     ScalarFloat m_cos_twist = 1.f, m_sin_twist = 0.f;
     std::string m_json;
     CorePtr m_core;
     uint32_t m_core_flags = 0;
     bool m_has_coherent = false;
+    std::string m_warnings, m_pending_warnings; // logged, and of the core in use
 
     MI_TRAVERSE_CB(Base)
 };

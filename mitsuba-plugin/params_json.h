@@ -1,13 +1,18 @@
 /* params_json.h: JSON text of the core's parameter object (stam_brdf_new)
  * from the plugin's properties: string escaping, numbers that read back
- * exactly, and the comma-separated height list of a tabulated profile.
+ * exactly, the height list of a tabulated profile in its three written
+ * forms, and the core's unknown-key message completed with the plugin's
+ * own keys.
  */
 #pragma once
 
 #include <mitsuba/mitsuba.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -43,12 +48,36 @@ inline std::string json_number(double v) {
     return buf;
 }
 
+/// A parameter the plugin refuses: the message names it (no "diffraction:"
+/// prefix, which the caller adds once).
+struct ParamError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+inline bool is_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
+
+/// s without leading and trailing white space
+inline std::string trimmed(const std::string &s) {
+    size_t a = 0, b = s.size();
+    while (a < b && is_space(s[a]))
+        ++a;
+    while (b > a && is_space(s[b - 1]))
+        --b;
+    return s.substr(a, b - a);
+}
+
+/// The start of a long value, for messages
+inline std::string excerpt(const std::string &s, size_t max_len = 40) {
+    return s.size() <= max_len ? s : s.substr(0, max_len) + "...";
+}
+
 /// Parse "0.1, 0.2,0.3" into numbers; false if it is not such a list.
+/// Non-finite numbers ("nan", "inf") are parsed: the caller refuses them.
 inline bool parse_number_list(const std::string &s, std::vector<double> &out) {
     const char *p = s.c_str();
     out.clear();
     while (true) {
-        while (*p == ' ' || *p == '\t' || *p == '\n')
+        while (is_space(*p))
             ++p;
         char *end = nullptr;
         double v = std::strtod(p, &end);
@@ -56,7 +85,7 @@ inline bool parse_number_list(const std::string &s, std::vector<double> &out) {
             return false;
         out.push_back(v);
         p = end;
-        while (*p == ' ' || *p == '\t' || *p == '\n')
+        while (is_space(*p))
             ++p;
         if (*p == '\0')
             return !out.empty();
@@ -64,6 +93,140 @@ inline bool parse_number_list(const std::string &s, std::vector<double> &out) {
             return false;
         ++p;
     }
+}
+
+/// The forms of the `profile` parameter, for messages.
+inline const char *profile_forms() {
+    return "\"rect\", \"sine\", or the heights of one period in micrometres "
+           "written as \"0, 0.1, 0.2\", \"[0, 0.1, 0.2]\" or "
+           "{\"heights_um\": [0, 0.1, 0.2]}";
+}
+
+/// A tabulated profile written as a string: "h0, h1, ...", "[h0, h1, ...]"
+/// or {"heights_um": [h0, h1, ...]} (the core's JSON form). Returns false
+/// when `s` is none of these (a profile name); throws ParamError, naming
+/// the parameter, when it is one of them but malformed or holds a NaN or
+/// an infinite height.
+inline bool parse_profile_heights(const std::string &s, std::vector<double> &out) {
+    std::string t = trimmed(s);
+    if (t.empty())
+        throw ParamError(std::string("parameter 'profile' is empty (accepted: ") +
+                         profile_forms() + ")");
+    auto refuse = [&](const std::string &why) {
+        throw ParamError("parameter 'profile' = \"" + excerpt(t) + "\": " + why +
+                         " (accepted: " + profile_forms() + ")");
+    };
+    std::string list = t;
+    if (t.front() == '{') {
+        // {"heights_um": [ ... ]}
+        size_t key = t.find("\"heights_um\"");
+        size_t colon = key == std::string::npos ? key : t.find(':', key);
+        size_t open = colon == std::string::npos ? colon : t.find('[', colon);
+        size_t close = t.rfind(']');
+        bool ok = open != std::string::npos && close != std::string::npos && close > open &&
+                  trimmed(t.substr(1, key - 1)).empty() &&
+                  trimmed(t.substr(key + 12, colon - key - 12)).empty() &&
+                  trimmed(t.substr(colon + 1, open - colon - 1)).empty() &&
+                  trimmed(t.substr(close + 1)) == "}";
+        if (!ok)
+            refuse("an object profile must be exactly {\"heights_um\": [h0, h1, ...]}");
+        list = t.substr(open + 1, close - open - 1);
+    } else if (t.front() == '[') {
+        if (t.back() != ']')
+            refuse("a bracketed list must end with ']'");
+        list = t.substr(1, t.size() - 2);
+    } else {
+        char first = t.front();
+        bool numeric = std::string("+-.0123456789").find(first) != std::string::npos;
+        if (!numeric && !parse_number_list(t, out))
+            return false; // a name: "rect", "sine", or one the core refuses by name
+    }
+    if (!parse_number_list(list, out))
+        refuse("not a comma-separated list of numbers");
+    for (size_t i = 0; i < out.size(); ++i)
+        if (!std::isfinite(out[i]))
+            refuse("height " + std::to_string(i) + " is " +
+                   (std::isnan(out[i]) ? std::string("NaN") : std::string("infinite")) +
+                   "; heights must be finite numbers (micrometres)");
+    return true;
+}
+
+/// Edit distance (insertions, deletions, substitutions) of two short keys
+inline size_t edit_distance(const std::string &a, const std::string &b) {
+    std::vector<size_t> row(b.size() + 1);
+    for (size_t j = 0; j <= b.size(); ++j)
+        row[j] = j;
+    for (size_t i = 1; i <= a.size(); ++i) {
+        size_t diag = row[0];
+        row[0] = i;
+        for (size_t j = 1; j <= b.size(); ++j) {
+            size_t up = row[j];
+            row[j] = std::min({ row[j] + 1, row[j - 1] + 1,
+                                diag + (a[i - 1] == b[j - 1] ? 0 : 1) });
+            diag = up;
+        }
+    }
+    return row[b.size()];
+}
+
+/// The core's message for an unknown key ("unknown parameter 'x' for
+/// surface 's' (accepted: a, b, c)") with the plugin's own keys added to
+/// its list and, when one is close, the accepted key that was probably
+/// meant. Other messages are returned unchanged.
+inline std::string with_plugin_keys(const std::string &msg,
+                                    const std::vector<std::string> &plugin_keys) {
+    const std::string head = "unknown parameter '", list_head = "(accepted: ";
+    size_t k0 = msg.find(head);
+    if (k0 == std::string::npos)
+        return msg;
+    k0 += head.size();
+    size_t k1 = msg.find('\'', k0);
+    if (k1 == std::string::npos)
+        return msg;
+    std::string key = msg.substr(k0, k1 - k0);
+
+    size_t l0 = msg.find(list_head, k1), l1 = msg.rfind(')');
+    std::vector<std::string> accepted;
+    std::string out;
+    if (l0 == std::string::npos || l1 == std::string::npos || l1 < l0) {
+        out = msg + " (the plugin also accepts:";
+        for (size_t i = 0; i < plugin_keys.size(); ++i)
+            out += (i ? ", " : " ") + plugin_keys[i];
+        out += ")";
+        accepted = plugin_keys;
+    } else {
+        size_t a = l0 + list_head.size();
+        std::string list = msg.substr(a, l1 - a);
+        size_t pos = 0;
+        while (pos <= list.size()) {
+            size_t comma = list.find(',', pos);
+            if (comma == std::string::npos)
+                comma = list.size();
+            std::string item = trimmed(list.substr(pos, comma - pos));
+            if (!item.empty())
+                accepted.push_back(item);
+            pos = comma + 1;
+        }
+        for (const std::string &pk : plugin_keys)
+            if (std::find(accepted.begin(), accepted.end(), pk) == accepted.end())
+                accepted.push_back(pk);
+        out = msg.substr(0, a);
+        for (size_t i = 0; i < accepted.size(); ++i)
+            out += (i ? ", " : "") + accepted[i];
+        out += msg.substr(l1);
+    }
+    std::string best;
+    size_t best_d = 3; // suggest only within two edits (a forgotten unit suffix is none)
+    for (const std::string &c : accepted) {
+        size_t d = std::min(edit_distance(key, c), edit_distance(key + "_um", c));
+        if (d < best_d) {
+            best_d = d;
+            best = c;
+        }
+    }
+    if (!best.empty())
+        out += "; did you mean '" + best + "'?";
+    return out;
 }
 
 NAMESPACE_END(diffraction_detail)

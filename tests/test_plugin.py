@@ -459,7 +459,8 @@ def test16_traverse_and_update(variant):
     params = mi.traverse(b)
     for k in ('sigma_um', 'corr_um', 'fresnel', 'twist'):
         assert k in params
-    assert 'surface' not in params    # strings are not traversable
+    # strings travel as a mi.Properties whose plugin name is the value
+    assert params['surface'].plugin_name() == 'gaussian'
     ctx = mi.BSDFContext()
     si = make_si(WI_LIST[1])
     wo = mi.Vector3f(-0.2, -0.1, math.sqrt(0.95))
