@@ -9,6 +9,8 @@
 #                 contact_sheet.png; scripts/render_gallery.py)
 #   make compare  Mitsuba vs Rust-only comparison to out/compare/ (scripts/compare.py;
 #                 exits non-zero when a check fails)
+#   make guide    the pictures of docs/guide.md: docs/img/guide/*.png
+#                 (scripts/render_guide.py, about a minute on two cores)
 # Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
 # override to link a different build of the core).
 
@@ -44,7 +46,7 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo compare render-tool core plugin setup clean-plugin test test-rust test-python lint bench bench-render stress
+.PHONY: all demo compare guide render-tool core plugin setup clean-plugin test test-rust test-python lint bench bench-render stress
 all: plugin
 
 demo: setup plugin
@@ -54,6 +56,9 @@ demo: setup plugin
 
 compare: setup plugin render-tool
 	$(PYTHON) scripts/compare.py
+
+guide: plugin
+	$(PYTHON) scripts/render_guide.py
 
 render-tool:
 	$(CARGO) build --release -p stam-render
