@@ -28,7 +28,7 @@ fractal, periodic grating with a twist, compact disc with concentric tracks):
 Each fails above 1 % relative RMSE (inside the sample, edge pixels excluded).
 Plus: the compact disc in scalar_spectral vs scalar_rgb (both Mitsuba) under a
 white light, relative L1 error over lit pixels <= 3 %, and BRDF slice plots
-(Mitsuba's bsdf.eval vs the core through its C ABI: scripts/stam_core.py).
+(Mitsuba's bsdf.eval vs the core through its C ABI: stam_diffraction.core).
 
 Writes out/compare/: <model>_<check>.png (Mitsuba | Rust-only | |difference|
 heat map), slices_<model>.png, report.md; with --write-docs also docs/compare.md.
@@ -49,10 +49,11 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
-import stam_core  # noqa: E402
+sys.path.insert(0, os.path.join(ROOT, 'python'))
 import stam_images  # noqa: E402
 import stam_materials  # noqa: E402
 import stam_mitsuba  # noqa: E402
+from stam_diffraction import core as stam_core  # noqa: E402
 
 RENDER_BIN = os.path.join(ROOT, 'target', 'release', 'stam-render')
 OUT_DIR = os.path.join(ROOT, 'out', 'compare')
@@ -370,7 +371,7 @@ def check_cd_spectral_vs_rgb(size, subpixels, out_dir=OUT_DIR, pictures=True,
 
 def core_eval(material, wi, wo, lam=None):
     """f (without cos) for directions in the core's frame, through the C ABI
-    (scripts/stam_core.py); (n, 3) RGB, or (n,) at the wavelengths lam."""
+    (stam_diffraction.core); (n, 3) RGB, or (n,) at the wavelengths lam."""
     with stam_core.Brdf(material) as b:
         return b.eval_rgb(wi, wo) if lam is None else b.eval_spectral(wi, wo, lam)
 

@@ -1,4 +1,4 @@
-"""Tests of scripts/stam_core.py, the ctypes binding of the core's C ABI
+"""Tests of stam_diffraction.core (python/), the ctypes binding of the core's C ABI
 (target/release/libstam.so, `make core`), each method against something
 independent of it: closed forms (a flat spectrum, the coherent lobe's
 F^2 exp(-g)), another entry point of the ABI, Monte Carlo integrals against
@@ -16,8 +16,9 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'scripts'))
-import stam_core  # noqa: E402
+sys.path.insert(0, os.path.join(ROOT, 'python'))
 import stam_materials  # noqa: E402
+from stam_diffraction import core as stam_core  # noqa: E402
 
 # Spectrally flat: a fractal with H = 1 scatters the same at every wavelength,
 # and a constant Fresnel reflectance keeps it so.

@@ -3,7 +3,7 @@
 Patterns follow Mitsuba's own BSDF tests (src/bsdfs/tests): creation and flags,
 eval == eval_pdf[0], pdf == eval_pdf[1], chi2 of sample vs pdf, sample weight
 * pdf == eval, bs.pdf == pdf(bs.wo); plus checks against the core's C ABI
-(target/release/libstam.so through scripts/stam_core.py), the Beckmann limit
+(target/release/libstam.so through stam_diffraction.core), the Beckmann limit
 (Mitsuba's roughconductor), bad parameters, and renders in every supported
 variant. The materials are those of tests/materials.json tagged `plugin` and
 `plugin-chi2`.
@@ -20,12 +20,11 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'scripts'))
-import stam_core  # noqa: E402
+sys.path.insert(0, os.path.join(ROOT, 'python'))
 import stam_materials  # noqa: E402
+# before drjit: the package sets DRJIT_LIBLLVM_PATH and DRJIT_CACHE_DIR
 import stam_mitsuba  # noqa: E402
-
-# DRJIT_LIBLLVM_PATH must be set before drjit is imported
-stam_mitsuba.configure_env()
+from stam_diffraction import core as stam_core  # noqa: E402
 
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402

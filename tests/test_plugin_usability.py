@@ -12,7 +12,7 @@
 - mi.traverse updates are transactional (a refused update leaves the
   material as it was, and later updates work) and carry string parameters.
 
-The oracle for the frames is the core itself (scripts/stam_core.py): at a
+The oracle for the frames is the core itself (stam_diffraction.core): at a
 point whose periodic direction is expected along the world vector d, the
 plugin's eval must equal the core's f at the directions rotated into the
 frame whose x axis is d, times cos theta_o.
@@ -29,10 +29,10 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'scripts'))
-import stam_core  # noqa: E402
+sys.path.insert(0, os.path.join(ROOT, 'python'))
+# before drjit: the package sets DRJIT_LIBLLVM_PATH and DRJIT_CACHE_DIR
 import stam_mitsuba  # noqa: E402
-
-stam_mitsuba.configure_env()
+from stam_diffraction import core as stam_core  # noqa: E402
 
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402

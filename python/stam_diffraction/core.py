@@ -1,14 +1,15 @@
-"""stam_core: the core's C ABI (rust-core/include/stam.h) through ctypes.
+"""stam_diffraction.core: the core's C ABI (stam.h) through ctypes.
 
-    import sys; sys.path.insert(0, 'scripts')
-    import stam_core
-    with stam_core.Brdf({'surface': 'cd'}) as b:
+    from stam_diffraction import core
+    with core.Brdf({'surface': 'cd'}) as b:
         rgb = b.eval_rgb(wi, wo)                 # (..., 3), 1/sr, without cos
         f = b.eval_spectral(wi, wo, 550.0)       # (...)
 
-The library is target/release/libstam.so (`make core`), or the file named by
-the environment variable STAM_CORE_LIB; it is loaded on first use, so importing
-this module needs no build (SRGB_LUMINANCE is read from the header).
+The library is the core's shared library: libstam.so shipped in the package
+when it is installed from the wheel, target/release/libstam.so (`make core`)
+in a source checkout, or the file named by the environment variable
+STAM_CORE_LIB. It is loaded on first use (SRGB_LUMINANCE is read from stam.h,
+also shipped in the package).
 
 Arrays: a direction is 3 numbers in the core's local frame (z = normal, x = the
 periodic direction of gratings), so wi, wo have shape (..., 3); wavelengths
@@ -28,9 +29,7 @@ import re
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-HEADER = os.path.join(ROOT, 'rust-core', 'include', 'stam.h')
-DEFAULT_LIB = os.path.join(ROOT, 'target', 'release', 'libstam.so')
+from ._layout import CORE_LIB as DEFAULT_LIB, HEADER
 
 # Bytes of the construction error message buffer (the message names the bad
 # key and its accepted range; the core truncates to this length).
@@ -48,7 +47,7 @@ def _header_luminance(path=HEADER):
         text = f.read()
     found = dict(re.findall(r'^#define\s+STAM_SRGB_LUMINANCE_([RGB])\s+(\S+)', text, re.M))
     if set(found) != {'R', 'G', 'B'}:
-        raise RuntimeError('stam_core: %s lacks STAM_SRGB_LUMINANCE_R/G/B' % path)
+        raise RuntimeError('stam_diffraction.core: %s lacks STAM_SRGB_LUMINANCE_R/G/B' % path)
     return tuple(float(found[c]) for c in 'RGB')
 
 
@@ -71,8 +70,8 @@ def lib():
         return _lib
     path = library_path()
     if not os.path.exists(path):
-        raise FileNotFoundError('stam_core: %s not built (make core), or set STAM_CORE_LIB'
-                                % path)
+        raise FileNotFoundError('stam_diffraction.core: %s not found (`make core` in a '
+                                'source checkout), or set STAM_CORE_LIB' % path)
     L = ctypes.CDLL(path)
     vp, sz, fp = ctypes.c_void_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_float)
     u8p = ctypes.POINTER(ctypes.c_uint8)
@@ -123,7 +122,8 @@ def _ptr(a):
 def _vectors(a, name):
     a = np.asarray(a, dtype=np.float64)
     if a.ndim == 0 or a.shape[-1] != 3:
-        raise ValueError('stam_core: %s must have shape (..., 3), not %s' % (name, a.shape))
+        raise ValueError('stam_diffraction.core: %s must have shape (..., 3), not %s'
+                         % (name, a.shape))
     return a
 
 
@@ -162,11 +162,12 @@ class Brdf:
 
     def _handle(self):
         if not self._ptr:
-            raise ValueError('stam_core: the material is closed')
+            raise ValueError('stam_diffraction.core: the material is closed')
         return self._ptr
 
     def __repr__(self):
-        return 'stam_core.Brdf(%s%s)' % (self.params_json, '' if self._ptr else ', closed')
+        return 'stam_diffraction.core.Brdf(%s%s)' % (self.params_json,
+                                                     '' if self._ptr else ', closed')
 
     # -- properties -------------------------------------------------------------
 
@@ -294,7 +295,7 @@ class Brdf:
             return shape, n, 0, 3, None
         lam = np.asarray(lambda_nm, dtype=np.float64)
         if lam.ndim == 0:
-            raise ValueError('stam_core: vertex wavelengths must have shape (..., nw)')
+            raise ValueError('stam_diffraction.core: vertex wavelengths must have shape (..., nw)')
         nw = lam.shape[-1]
         shape, n = self._batch(*shapes, lam.shape[:-1])
         return shape, n, nw, nw, self._lanes(lam, shape, n, (nw,))
