@@ -11,6 +11,8 @@
 #                 exits non-zero when a check fails)
 #   make guide    the pictures of docs/guide.md: docs/img/guide/*.png
 #                 (scripts/render_guide.py, about a minute on two cores)
+#   make wheel    the pip-installable package stam-diffraction: dist/*.whl
+#                 (pyproject.toml; its CMakeLists.txt runs `make plugin`)
 # Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
 # override to link a different build of the core).
 
@@ -25,6 +27,9 @@ STAM_H    := rust-core/include/stam.h
 PLUGIN_SO := $(BUILD)/plugins/diffraction.so
 PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
 PLUGIN_HDR := mitsuba-plugin/batch.h mitsuba-plugin/params_json.h
+# The mitsuba and drjit versions the plugin is compiled against (JSON); the
+# package stam_diffraction refuses to load the plugin under others.
+PLUGIN_ABI := $(BUILD)/plugins/diffraction.abi.json
 
 # Package locations, computed once and only when needed (no import of mitsuba).
 pkgdir = $(shell $(PYTHON) -c "import importlib.util as u; print(u.find_spec('$(1)').submodule_search_locations[0])")
@@ -39,14 +44,17 @@ PLUGIN_CXXFLAGS = -std=c++17 -O3 -march=haswell -fPIC -fvisibility=hidden \
 	-Wall -Wextra -Wshadow \
 	-isystem $(MI_DIR)/include -isystem $(DR_DIR)/include -isystem $(NB_INC) \
 	-isystem $(dir $(NB_INC))ext/robin_map/include
-PLUGIN_LDFLAGS = -shared -Wl,--no-undefined -Wl,--exclude-libs,ALL \
-	-L$(MI_DIR) -L$(DR_DIR) -Wl,-rpath,$(MI_DIR) -Wl,-rpath,$(DR_DIR)
+# The run path is that of the installed package (site-packages/stam_diffraction/plugins/),
+# for the wheel ships this file; wherever the plugin lies, Mitsuba has loaded these
+# libraries before it, and the loader finds them by name, as for Mitsuba's own plugins.
+PLUGIN_LDFLAGS = -shared -Wl,--no-undefined -Wl,--exclude-libs,ALL -L$(MI_DIR) -L$(DR_DIR) \
+	-Wl,-rpath,'$$ORIGIN/../../mitsuba' -Wl,-rpath,'$$ORIGIN/../../drjit'
 PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpthread -ldl -lm
 
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo compare guide render-tool core plugin setup clean-plugin test test-rust test-python lint bench bench-render stress
+.PHONY: all demo compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint bench bench-render stress FORCE
 all: plugin
 
 demo: setup plugin
@@ -77,12 +85,27 @@ else
 plugin: $(PLUGIN_SO)
 endif
 
-$(PLUGIN_SO): $(PLUGIN_SRC) $(PLUGIN_HDR) $(STAM_H) $(STAM_LIB)
+$(PLUGIN_SO): $(PLUGIN_SRC) $(PLUGIN_HDR) $(STAM_H) $(STAM_LIB) $(PLUGIN_ABI)
 	@mkdir -p $(dir $@)
 	$(CXX) $(PLUGIN_CXXFLAGS) $(PLUGIN_SRC) -o $@ $(PLUGIN_LDFLAGS) $(PLUGIN_LIBS)
 
+# Rewritten only when $(PYTHON)'s versions differ from the recorded ones, which
+# rebuilds the plugin against their headers.
+$(PLUGIN_ABI): FORCE
+	@mkdir -p $(dir $@)
+	@$(PYTHON) -c 'import json; from importlib.metadata import version; \
+		print(json.dumps({p: version(p) for p in ("mitsuba", "drjit")}))' > $@.new
+	@if cmp -s $@.new $@; then rm $@.new; else mv $@.new $@; fi
+
 clean-plugin:
-	rm -f $(PLUGIN_SO)
+	rm -f $(PLUGIN_SO) $(PLUGIN_ABI)
+
+# Built with the venv's packages (no build isolation: the pinned mitsuba, drjit,
+# nanobind, scikit-build-core and cmake of scripts/requirements.txt); `pip install .`
+# builds the same in an isolated environment from pyproject.toml's pins.
+wheel:
+	rm -f dist/stam_diffraction-*.whl
+	$(PYTHON) -m pip wheel --no-build-isolation --no-deps --wheel-dir dist .
 
 lint:
 	$(CARGO) fmt --all -- --check
