@@ -156,8 +156,10 @@ struct BatchIO {
                 Throw("diffraction: the native core needs concrete arrays, but this "
                       "call is being recorded symbolically. Disable "
                       "dr.JitFlag.SymbolicLoops and dr.JitFlag.SymbolicCalls "
-                      "(evaluated mode), e.g. with scripts/stam_mitsuba.py's setup(), "
-                      "and do not use dr.freeze with this BSDF.");
+                      "(evaluated mode): importing stam_diffraction does it in the "
+                      "importing thread, stam_diffraction.set_evaluated_mode() in "
+                      "another, `mitsuba -W -W` on the command line. Do not use "
+                      "dr.freeze with this BSDF.");
         }
     }
 
