@@ -101,15 +101,14 @@ def check_versions(compiled=None, installed=None):
 def find_libllvm(min_major=LLVM_MIN_MAJOR, patterns=LLVM_PATTERNS):
     """Path of the newest libLLVM with major version >= min_major among the
     files matching `patterns`, or None."""
-    best = None
+    found = []
     for pattern in patterns:
         for path in glob.glob(pattern):
             m = (re.match(r'libLLVM(?:\.so\.|-)(\d+)', os.path.basename(path))
                  or re.search(r'/llvm-(\d+)/', path))
             if m and int(m.group(1)) >= min_major:
-                key = (int(m.group(1)), path)
-                best = max(best, key) if best else key
-    return best[1] if best else None
+                found.append((int(m.group(1)), path))
+    return max(found)[1] if found else None
 
 
 def _configure_drjit_environment():
