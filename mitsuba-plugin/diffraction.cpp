@@ -25,11 +25,9 @@
 
 #include <cmath>
 #include <cstdio>
-#include <mutex>
 #include <sstream>
 #include <string>
 #include <typeinfo>
-#include <unordered_map>
 #include <vector>
 
 #include "../rust-core/include/stam.h"
@@ -686,35 +684,23 @@ private:
         void put_object(std::string_view, Object *, uint32_t) override { }
     };
 
-    /// How one shape defines the tracks; cached per shape (a shape's kind
-    /// does not change).
+    /// How one shape defines the tracks. A mesh is probed at every call
+    /// (scalar variants: per query, a few ns; JIT variants: once per batch
+    /// and mesh): a cache keyed by the shape's address would go stale when
+    /// a freed mesh's address is reused.
     static uint32_t shape_kind(const Shape *shape) {
         if (!shape)
             return UvShape;
-        static thread_local std::pair<const Shape *, uint32_t> last{ nullptr, UvShape };
-        if (last.first == shape)
-            return last.second;
-        static std::mutex mutex;
-        static std::unordered_map<const Shape *, uint32_t> known;
-        std::lock_guard<std::mutex> guard(mutex);
-        auto it = known.find(shape);
-        uint32_t kind = UvShape;
-        if (it != known.end()) {
-            kind = it->second;
-        } else {
-            uint32_t type = shape->shape_type();
-            if (type == +ShapeType::Disk) {
-                kind = PolarDisk;
-            } else if (type == +ShapeType::Mesh) {
-                TexcoordProbe probe;
-                const_cast<Shape *>(shape)->traverse(&probe);
-                if (probe.seen && probe.width == 0)
-                    kind = MeshWithoutUv;
-            }
-            known.emplace(shape, kind);
+        uint32_t type = shape->shape_type();
+        if (type == +ShapeType::Disk)
+            return PolarDisk;
+        if (type == +ShapeType::Mesh) {
+            TexcoordProbe probe;
+            const_cast<Shape *>(shape)->traverse(&probe);
+            if (probe.seen && probe.width == 0)
+                return MeshWithoutUv;
         }
-        last = { shape, kind };
-        return kind;
+        return UvShape;
     }
 
     /// How the shape of each lane defines the tracks. Throws for a mesh
@@ -767,11 +753,12 @@ private:
         // (r cos phi, r sin phi).
         Float r = si.uv.x();
         auto [sin_phi, cos_phi] = dr::sincos(dr::TwoPi<Float> * si.uv.y());
-        Vector3f m_e_phi = si.dp_dv * dr::select(r > 1e-7f, dr::rcp(dr::TwoPi<Float> * r), 0.f);
+        Vector3f e_phi_world =
+            si.dp_dv * dr::select(r > 1e-7f, dr::rcp(dr::TwoPi<Float> * r), 0.f);
         Vector3f dir;
         if (linear) {
             // Generic: the shading tangent; disk: its object x axis
-            Vector3f disk_x = si.dp_du * cos_phi - m_e_phi * sin_phi;
+            Vector3f disk_x = si.dp_du * cos_phi - e_phi_world * sin_phi;
             dir = dr::select(disk, si.sh_frame.to_local(disk_x), Vector3f(1.f, 0.f, 0.f));
         } else {
             // Radial: from the centre to the point. Generic: the displacement
@@ -779,7 +766,7 @@ private:
             // with C = (2 center_u - 1, 2 center_v - 1) in object units.
             Float cx = 2.f * m_center_u - 1.f, cy = 2.f * m_center_v - 1.f;
             Float c_r = cx * cos_phi + cy * sin_phi, c_phi = cy * cos_phi - cx * sin_phi;
-            Vector3f disk_r = si.dp_du * (r - c_r) - m_e_phi * c_phi;
+            Vector3f disk_r = si.dp_du * (r - c_r) - e_phi_world * c_phi;
             Vector3f uv_r = si.dp_du * (si.uv.x() - m_center_u) +
                             si.dp_dv * (si.uv.y() - m_center_v);
             dir = si.sh_frame.to_local(dr::select(disk, disk_r, uv_r));

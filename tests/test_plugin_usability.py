@@ -262,6 +262,26 @@ def test_tracks_on_a_mesh_without_uv_are_refused(variant, tracks, tmp_path):
     assert np.all(np.isfinite(plugin_eval(iso, si, outgoing(1)[0])[0]))
 
 
+@pytest.mark.parametrize('variant', VARIANTS)
+def test_meshes_are_judged_each_time(variant, tmp_path):
+    """Scenes built and freed in turn, with and without uv, the same BSDF
+    object: a freed mesh's address may be reused, so nothing about a mesh
+    may be remembered by address."""
+    use(variant)
+    with_uv = write_square(str(tmp_path / 'uv.obj'), with_uv=True)
+    without = write_square(str(tmp_path / 'plain.obj'), with_uv=False)
+    bsdf = mi.load_dict({'type': 'diffraction', **CD, 'tracks': 'concentric'})
+    points = np.array(POINTS_MESH) - [3.0, 1.0, 0.0]
+    for _ in range(3):
+        scene = shape_scene({'type': 'obj', 'filename': with_uv, 'bsdf': bsdf})
+        assert np.all(np.isfinite(plugin_eval(bsdf, hits(scene, points), outgoing(1)[0])[0]))
+        del scene
+        scene = shape_scene({'type': 'obj', 'filename': without, 'bsdf': bsdf})
+        with pytest.raises(Exception, match='texture coordinates'):
+            plugin_eval(bsdf, hits(scene, points), outgoing(1)[0])
+        del scene
+
+
 @pytest.mark.parametrize('variant', ['scalar_rgb', 'llvm_ad_rgb'])
 def test_render_of_a_mesh_without_uv_raises_the_error(variant, tmp_path):
     use(variant)
