@@ -54,7 +54,7 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint bench bench-render stress FORCE
+.PHONY: all demo compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint bench bench-render stress furnace FORCE
 all: plugin
 
 demo: setup plugin
@@ -131,6 +131,14 @@ bench:
 	$(CARGO) run --release -p stress --bin pareto -- target/pareto/errors.json
 	$(CARGO) bench -p stress --bench pareto
 	$(PYTHON) scripts/plot_pareto.py
+
+# White furnace: directional albedo of every test material, Stam's formula and
+# "energy": "conserving", printed as tables (docs/energy.md) and plotted
+# (docs/img/energy_furnace.png).
+furnace: setup
+	@mkdir -p target/furnace docs/img
+	$(CARGO) run --release -p stam-core --example furnace -- 100000 target/furnace/albedo.json | tee target/furnace/table.md
+	$(PYTHON) scripts/plot_furnace.py target/furnace/albedo.json docs/img/energy_furnace.png
 
 # The full numerical stress run (10^7 evaluations; CI runs 10^5 in test-rust).
 stress:

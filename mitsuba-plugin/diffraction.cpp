@@ -125,6 +125,14 @@ Diffraction BSDF (:monosp:`diffraction`)
      alone is a dielectric (k = 0: eta 1.5 reflects 4 % at normal
      incidence); metals need both. (Default: none; k: 0 when eta is given)
    - |exposed|
+ * - energy
+   - |string|
+   - ``stam``: the paper's formula, which near grazing directions can
+     reflect more light than it receives; ``conserving``: f scaled by
+     m(wi, lambda) m(wo, lambda) so that no direction does (reciprocal; the
+     table is built from the material on its first use, 0.03-1 s;
+     ``docs/energy.md``). (Default: ``stam``)
+   - |exposed| (a string)
  * - series_tolerance
    - |float|
    - Gaussian surfaces: relative truncation tolerance of the Poisson series

@@ -7,6 +7,9 @@
 //! goes through the model's strategy (`Strategy`); `vertex` answers a path
 //! vertex's queries in one call.
 
+pub mod energy;
+#[cfg(test)]
+mod energy_tests;
 pub mod params;
 pub mod plausibility;
 #[cfg(test)]
@@ -23,19 +26,32 @@ pub use vertex::Channels;
 
 use crate::error::StamError;
 use crate::models::gaussian::SeriesSettings;
+use crate::models::SurfaceParams;
 use crate::models::{f_spectral, RgbRule, Shading};
 use crate::optics::fresnel::{Fresnel, FresnelAtCos};
-use crate::optics::geometry::{normalize_direction, PairGeometry, MIN_COS};
+use crate::optics::geometry::{normalize_direction, reflect, PairGeometry, MIN_COS};
 use crate::special::finite_non_negative;
 use crate::spectrum::{self, gamut_map, in_band};
+use energy::{EnergyMode, EnergyTable, PairEnergy};
 use glam::DVec3;
 use params::MaterialParams;
+use std::sync::OnceLock;
 
 pub struct Brdf {
     surface: Surface,
     fresnel: Fresnel,
     /// Wavelength rule of the RGB path for spectrally smooth surfaces.
     rgb_rule: RgbRule,
+    /// The energy-conserving scaling ("energy": "conserving"; None: Stam's
+    /// formula), built from the surface's parameters on the first
+    /// evaluation.
+    energy: Option<Energy>,
+}
+
+/// What the energy table is built from, and the table once built.
+struct Energy {
+    surface: SurfaceParams,
+    table: OnceLock<EnergyTable>,
 }
 
 impl Brdf {
@@ -46,11 +62,44 @@ impl Brdf {
     pub fn new(params: MaterialParams) -> Result<Brdf, StamError> {
         let surface = Surface::new(&params.surface, &params.fresnel)?;
         let rgb_rule = RgbRule::new(params.surface.rgb_nodes(), &params.fresnel);
+        let energy = (params.energy == EnergyMode::Conserving).then(|| Energy {
+            surface: params.surface.clone(),
+            table: OnceLock::new(),
+        });
         Ok(Brdf {
             surface,
             fresnel: params.fresnel,
             rgb_rule,
+            energy,
         })
+    }
+
+    /// The energy table of a conserving material, built on first use from
+    /// its white twin (F = 1, Stam's formula).
+    pub fn energy_table(&self) -> Option<&EnergyTable> {
+        let energy = self.energy.as_ref()?;
+        Some(energy.table.get_or_init(|| {
+            let white = Brdf::new(MaterialParams {
+                surface: energy.surface.clone(),
+                fresnel: Fresnel::Constant(1.0),
+                energy: EnergyMode::Stam,
+            })
+            .expect("the white twin of a valid material is valid");
+            let azimuthal = self.flags() & FLAG_ANISOTROPIC != 0;
+            EnergyTable::build(
+                &white,
+                azimuthal,
+                (spectrum::LAMBDA_MIN_NM, spectrum::LAMBDA_MAX_NM),
+                self.surface.energy_hint(),
+            )
+        }))
+    }
+
+    /// The energy scaling m(wi, lambda) m(wo, lambda) of a pair (None for
+    /// Stam's formula).
+    #[inline]
+    pub fn pair_energy(&self, wi: DVec3, wo: DVec3) -> Option<PairEnergy<'_>> {
+        self.energy_table().map(|t| t.pair(wi, wo))
     }
 
     /// The surface model (read-only: tools that look at its physics).
@@ -72,14 +121,29 @@ impl Brdf {
     }
 
     pub fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<Brdf>() + self.rgb_rule.memory_bytes() + self.surface.memory_bytes()
+        std::mem::size_of::<Brdf>()
+            + self.rgb_rule.memory_bytes()
+            + self.surface.memory_bytes()
+            + self
+                .energy
+                .as_ref()
+                .and_then(|e| e.table.get())
+                .map_or(0, |t| t.memory_bytes())
+    }
+
+    /// What the surface model needs besides the geometry, without a
+    /// pair factor.
+    #[inline]
+    pub(crate) fn shading(&self) -> Shading<'_> {
+        self.shading_with(None)
     }
 
     #[inline]
-    pub(crate) fn shading(&self) -> Shading<'_> {
+    fn shading_with<'a>(&'a self, pair_factor: Option<&'a dyn Fn(f64) -> f64>) -> Shading<'a> {
         Shading {
             fresnel: &self.fresnel,
             rgb_rule: &self.rgb_rule,
+            pair_factor,
         }
     }
 
@@ -118,7 +182,29 @@ impl Brdf {
         lambda_nm: f64,
         fresnel: &FresnelAtCos,
     ) -> f64 {
-        f_spectral(geom, lambda_nm, fresnel, |k| self.surface.kernel(k, geom))
+        self.eval_spectral_scaled(
+            geom,
+            lambda_nm,
+            fresnel,
+            &self.pair_energy(geom.wi, geom.wo),
+        )
+    }
+
+    /// `eval_spectral_with` with the pair's energy scaling given (several
+    /// wavelengths of one pair share it).
+    #[inline]
+    pub fn eval_spectral_scaled(
+        &self,
+        geom: &PairGeometry,
+        lambda_nm: f64,
+        fresnel: &FresnelAtCos,
+        energy: &Option<PairEnergy>,
+    ) -> f64 {
+        let f = f_spectral(geom, lambda_nm, fresnel, |k| self.surface.kernel(k, geom));
+        match energy {
+            Some(e) if f > 0.0 => f * e.at(lambda_nm),
+            _ => f,
+        }
     }
 
     /// f projected to linear sRGB (D65-weighted), without the coherent lobe.
@@ -140,7 +226,10 @@ impl Brdf {
         let Some(geom) = PairGeometry::new(wi, wo) else {
             return [0.0; 3];
         };
-        let rgb = reflectance(&self.shading(), &geom);
+        let energy = self.pair_energy(geom.wi, geom.wo);
+        let factor = energy.as_ref().map(|e| move |lambda: f64| e.at(lambda));
+        let shading = self.shading_with(factor.as_ref().map(|f| f as &dyn Fn(f64) -> f64));
+        let rgb = reflectance(&shading, &geom);
         gamut_map(rgb.map(|c| c * geom.geometric_factor)).map(finite_non_negative)
     }
 
@@ -155,21 +244,27 @@ impl Brdf {
         if !in_band(lambda_nm) {
             return 0.0;
         }
-        let Some(cos_i) = incidence_cosine(wi) else {
+        let Some(wi) = incidence_direction(wi) else {
             return 0.0;
         };
-        finite_non_negative(
-            self.surface
-                .coherent_spectral(&self.shading(), cos_i, lambda_nm),
-        )
+        let r = self
+            .surface
+            .coherent_spectral(&self.shading(), wi.z, lambda_nm);
+        match self.pair_energy(wi, reflect(wi)) {
+            Some(e) if r > 0.0 => finite_non_negative(r * e.at(lambda_nm)),
+            _ => finite_non_negative(r),
+        }
     }
 
     /// Coherent-lobe reflectance in linear sRGB.
     pub fn coherent_rgb(&self, wi: DVec3) -> [f64; 3] {
-        let Some(cos_i) = incidence_cosine(wi) else {
+        let Some(wi) = incidence_direction(wi) else {
             return [0.0; 3];
         };
-        let rgb = self.surface.coherent_rgb(&self.shading(), cos_i);
+        let energy = self.pair_energy(wi, reflect(wi));
+        let factor = energy.as_ref().map(|e| move |lambda: f64| e.at(lambda));
+        let shading = self.shading_with(factor.as_ref().map(|f| f as &dyn Fn(f64) -> f64));
+        let rgb = self.surface.coherent_rgb(&shading, wi.z);
         gamut_map(rgb).map(finite_non_negative)
     }
 
@@ -202,12 +297,7 @@ impl Brdf {
     }
 }
 
-/// cos(theta_i) of a direction above the horizon, else None.
-fn incidence_cosine(wi: DVec3) -> Option<f64> {
-    let wi = normalize_direction(wi)?;
-    if wi.z > MIN_COS {
-        Some(wi.z)
-    } else {
-        None
-    }
+/// The unit direction of wi when it is above the horizon, else None.
+fn incidence_direction(wi: DVec3) -> Option<DVec3> {
+    normalize_direction(wi).filter(|d| d.z > MIN_COS)
 }

@@ -4,6 +4,7 @@
 //! the same names. Lengths are micrometres, wavelengths nanometres. See
 //! docs/parameters.md.
 
+use super::energy::EnergyMode;
 use crate::error::StamError;
 use crate::json::{format_bound, type_name, Reader};
 pub use crate::models::fractal::params::DEFAULT_RGB_NODES as DEFAULT_RGB_NODES_FRACTAL;
@@ -22,12 +23,15 @@ pub mod range {
 }
 
 /// The keys the material reads whatever its surface.
-const MATERIAL_KEYS: [&str; 2] = ["surface", "fresnel"];
+const MATERIAL_KEYS: [&str; 3] = ["surface", "fresnel", "energy"];
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialParams {
     pub surface: SurfaceParams,
     pub fresnel: Fresnel,
+    /// "stam" (default: the paper's formula) or "conserving" (no direction
+    /// reflects more than it receives; docs/energy.md).
+    pub energy: EnergyMode,
 }
 
 fn err(msg: String) -> StamError {
@@ -46,7 +50,21 @@ impl MaterialParams {
         };
         let surface = SurfaceParams::parse(obj, &MATERIAL_KEYS)?;
         let fresnel = parse_fresnel(obj.get("fresnel"))?;
-        Ok(MaterialParams { surface, fresnel })
+        let energy = match obj.get("energy") {
+            None => EnergyMode::Stam,
+            Some(Value::String(s)) if s == "conserving" => EnergyMode::Conserving,
+            Some(Value::String(s)) if s == "stam" => EnergyMode::Stam,
+            Some(other) => {
+                return Err(err(format!(
+                    "parameter 'energy' = {other} is not accepted: \"stam\" (default: the paper's formula) or \"conserving\" (no direction reflects more than it receives)"
+                )))
+            }
+        };
+        Ok(MaterialParams {
+            surface,
+            fresnel,
+            energy,
+        })
     }
 }
 
@@ -209,7 +227,7 @@ mod tests {
             m.contains("unknown parameter 'series_tolerance' for surface 'cd'"),
             "{m}"
         );
-        assert!(m.contains("surface, fresnel, period_um"), "{m}");
+        assert!(m.contains("surface, fresnel, energy, period_um"), "{m}");
         let m = message(r#"{"surface":"cd","rgb_nodes":16}"#);
         assert!(m.contains("unknown parameter 'rgb_nodes'"), "{m}");
         let m = message(

@@ -56,8 +56,9 @@ impl Brdf {
                 match PairGeometry::new(wi, wo) {
                     Some(geom) => {
                         let fresnel = self.fresnel_at(&geom);
+                        let energy = self.pair_energy(geom.wi, geom.wo);
                         for (o, &lambda) in out.iter_mut().zip(lambdas) {
-                            *o = self.eval_spectral_with(&geom, lambda, &fresnel);
+                            *o = self.eval_spectral_scaled(&geom, lambda, &fresnel, &energy);
                         }
                     }
                     None => out.fill(0.0),

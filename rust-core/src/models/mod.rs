@@ -36,10 +36,33 @@ pub const FLAG_ANISOTROPIC: u32 = 2;
 pub const FLAG_SPECTRALLY_VARYING: u32 = 4;
 
 /// What a material gives its surface model besides the geometry: the
-/// Fresnel term and the RGB rule of spectrally smooth kernels.
+/// Fresnel term, the RGB rule of spectrally smooth kernels and a factor of
+/// the pair's f per wavelength (the material's energy scaling), which the
+/// RGB paths apply inside their wavelength integration.
 pub struct Shading<'a> {
     pub fresnel: &'a Fresnel,
     pub rgb_rule: &'a RgbRule,
+    pub pair_factor: Option<&'a dyn Fn(f64) -> f64>,
+}
+
+impl Shading<'_> {
+    /// The RGB rule's sum of `values` (K at its nodes) with F^2 and the
+    /// pair's factor at the nodes.
+    #[inline]
+    pub fn integrate(&self, cos: f64, values: &mut [f64]) -> [f64; 3] {
+        if let Some(factor) = self.pair_factor {
+            for (v, &lambda) in values.iter_mut().zip(self.rgb_rule.lambda_nm()) {
+                *v *= factor(lambda);
+            }
+        }
+        self.rgb_rule.integrate(self.fresnel, cos, values)
+    }
+
+    /// The pair's factor at lambda_nm (1 without one).
+    #[inline]
+    pub fn factor(&self, lambda_nm: f64) -> f64 {
+        self.pair_factor.map_or(1.0, |f| f(lambda_nm))
+    }
 }
 
 /// f(lambda) = F^2 G K(k) for a pair, with the Fresnel term at the pair's
@@ -57,6 +80,19 @@ pub fn f_spectral(
     }
     let k = wavenumber_per_um(lambda_nm);
     finite_non_negative(fresnel.reflectance(lambda_nm) * geom.geometric_factor * kernel(k))
+}
+
+/// How a model's energy-conserving table is made (`material::energy`).
+#[derive(Clone, Copy, Debug)]
+pub struct EnergyHint {
+    /// Wavelength nodes at which the table bounds the white material's
+    /// albedo.
+    pub wavelength_nodes: usize,
+    /// Whether the table keeps the nodes apart (albedos that change fast
+    /// with wavelength) or one colour-neutral factor (smooth ones).
+    pub per_wavelength: bool,
+    /// Below this cosine the horizon taper goes smoothly to 0.
+    pub horizon_taper_cos: f64,
 }
 
 /// What each surface model provides to the material.
@@ -86,6 +122,15 @@ pub trait SurfaceModel: Sized {
     /// The coherent lobe's reflectance in linear sRGB, before gamut mapping.
     fn coherent_rgb(&self, _shading: &Shading, _cos_i: f64) -> [f64; 3] {
         [0.0; 3]
+    }
+
+    /// How the energy-conserving material's table suits this model.
+    fn energy_hint(&self) -> EnergyHint {
+        EnergyHint {
+            wavelength_nodes: 5,
+            per_wavelength: false,
+            horizon_taper_cos: 0.1,
+        }
     }
 
     /// The one-wavelength strategy's component at unit wi above the horizon.
@@ -191,6 +236,10 @@ impl Surface {
     #[inline]
     pub fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
         dispatch!(self, Surface, m => m.reflectance_rgb(shading, geom))
+    }
+
+    pub fn energy_hint(&self) -> EnergyHint {
+        dispatch!(self, Surface, m => m.energy_hint())
     }
 
     pub fn coherent_spectral(&self, shading: &Shading, cos_i: f64, lambda_nm: f64) -> f64 {

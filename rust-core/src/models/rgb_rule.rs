@@ -60,6 +60,11 @@ impl RgbRule {
         }
     }
 
+    /// The node wavelengths (nm).
+    pub fn lambda_nm(&self) -> &[f64] {
+        &self.rule.lambda_nm[..self.len()]
+    }
+
     pub fn is_empty(&self) -> bool {
         self.k_per_um.is_empty()
     }

@@ -27,6 +27,9 @@ pub struct PairGeometry {
     /// wi . h with h the half vector: the local incidence cosine of the
     /// specular microfacet, where Fresnel is evaluated (Kirchhoff).
     pub cos_half: f64,
+    /// The directions, normalised.
+    pub wi: DVec3,
+    pub wo: DVec3,
 }
 
 impl PairGeometry {
@@ -53,6 +56,8 @@ impl PairGeometry {
             cos_o,
             geometric_factor,
             cos_half,
+            wi,
+            wo,
         })
     }
 

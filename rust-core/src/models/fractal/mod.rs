@@ -113,7 +113,7 @@ impl SurfaceModel for Fractal {
         let values = &mut values[..rule.len()];
         self.surface
             .kernel_at_wavenumbers(&rule.k_per_um, &rule.ln_k_per_um, geom, values);
-        rule.integrate(shading.fresnel, geom.cos_half, values)
+        shading.integrate(geom.cos_half, values)
     }
 
     fn spectral_component(&self, _: &Shading, wi: glam::DVec3, lambda_nm: f64) -> Component<Lobe> {

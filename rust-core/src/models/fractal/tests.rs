@@ -522,6 +522,8 @@ fn kernel_integrates_to_inverse_w_squared() {
                 cos_o: 0.85,
                 geometric_factor: 1.0,
                 cos_half: 1.0,
+                wi: DVec3::Z,
+                wo: DVec3::Z,
             };
             let wgt = if i == 0 || i == n { 0.5 } else { 1.0 };
             sum += wgt * s.kernel(k, &g) * TAU * r * r;
@@ -601,6 +603,8 @@ fn kernel_finite_for_extreme_inputs() {
                     cos_o: 1e-12,
                     geometric_factor: 4e24,
                     cos_half: 1.0,
+                    wi: DVec3::Z,
+                    wo: DVec3::Z,
                 };
                 assert!(s.kernel(12.0, &g).is_finite());
             }

@@ -167,9 +167,7 @@ impl SurfaceModel for Gaussian {
         let mut values = [0.0; MAX_RGB_NODES];
         let values = &mut values[..shading.rgb_rule.len()];
         self.kernel_at_nodes(shading, geom, true, values);
-        shading
-            .rgb_rule
-            .integrate(shading.fresnel, geom.cos_half, values)
+        shading.integrate(geom.cos_half, values)
     }
 
     fn coherent_spectral(&self, shading: &Shading, cos_i: f64, lambda_nm: f64) -> f64 {
@@ -193,7 +191,7 @@ impl SurfaceModel for Gaussian {
         for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
             *v = self.surface.coherent_attenuation(k, cos_i);
         }
-        rule.integrate(shading.fresnel, cos_i, values)
+        shading.integrate(cos_i, values)
     }
 
     fn spectral_component(

@@ -53,9 +53,7 @@ fn gaussian_rgb_table_matches_per_node_path_and_falls_back_outside() {
             let fast = brdf.eval_rgb(wi, wo);
             let per_node = brdf.eval_rgb_by(wi, wo, |shading, geom| {
                 model.kernel_at_nodes(shading, geom, false, &mut values);
-                shading
-                    .rgb_rule
-                    .integrate(shading.fresnel, geom.cos_half, &values)
+                shading.integrate(geom.cos_half, &mut values)
             });
             if table.kernel(&model.surface, &geom, &mut values) {
                 served += 1;
@@ -89,6 +87,8 @@ fn gaussian_rgb_table_is_lazy_and_within_memory_limit() {
             r#"{{"surface":"gaussian","sigma_um":0.2,"corr_x_um":2.0,"corr_y_um":9.0,"fresnel":"copper","rgb_nodes":{nodes}}}"#
         );
         let brdf = Brdf::from_json(&json).unwrap();
+        // The energy table is built on the first evaluation too.
+        brdf.energy_table();
         let before = brdf.memory_bytes();
         brdf.eval_spectral(wi, wo, 550.0);
         let Surface::Gaussian(model) = brdf.surface() else {
@@ -142,7 +142,9 @@ fn albedo_table_matches_quadrature() {
             0.3,
         ),
     ] {
-        let brdf = Brdf::from_json(json).unwrap();
+        // The sampling aid tabulates Stam's f (the strategy's coherent share).
+        let brdf =
+            Brdf::from_json(&format!(r#"{},"energy":"stam"}}"#, &json[..json.len() - 1])).unwrap();
         let lambda = 550.0;
         let wi = DVec3::new(f64::sqrt(1.0 - cos_i * cos_i), 0.0, cos_i);
         let Surface::Gaussian(model) = brdf.surface() else {

@@ -101,16 +101,28 @@ impl Periodic {
     /// broad-rule nodes from the node table where the material has one.
     pub(crate) fn reflectance_rgb_with(
         &self,
-        fresnel: &Fresnel,
+        shading: &Shading,
         geom: &PairGeometry,
         node_table: bool,
     ) -> [f64; 3] {
-        let fresnel = fresnel.at_cos(geom.cos_half);
-        let reflectance = |lambda_nm: f64| fresnel.reflectance(lambda_nm);
+        let fresnel = shading.fresnel.at_cos(geom.cos_half);
         let nodes = PeriodicSurface::broad_rule_wavelengths();
         let table = self.broad_reflectance.as_ref().filter(|_| node_table);
-        let at_node = |j: usize| fresnel.at_node(table, j, nodes[j]);
-        self.surface.kernel_rgb_with(geom, &reflectance, &at_node)
+        match shading.pair_factor {
+            None => {
+                let reflectance = |lambda_nm: f64| fresnel.reflectance(lambda_nm);
+                let at_node = |j: usize| fresnel.at_node(table, j, nodes[j]);
+                self.surface.kernel_rgb_with(geom, &reflectance, &at_node)
+            }
+            // The pair's factor (smooth in wavelength) joins the Fresnel
+            // term inside each order's integration.
+            Some(factor) => {
+                let reflectance =
+                    |lambda_nm: f64| fresnel.reflectance(lambda_nm) * factor(lambda_nm);
+                let at_node = |j: usize| fresnel.at_node(table, j, nodes[j]) * factor(nodes[j]);
+                self.surface.kernel_rgb_with(geom, &reflectance, &at_node)
+            }
+        }
     }
 }
 
@@ -140,7 +152,19 @@ impl SurfaceModel for Periodic {
     }
 
     fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
-        self.reflectance_rgb_with(shading.fresnel, geom, true)
+        self.reflectance_rgb_with(shading, geom, true)
+    }
+
+    /// Orders appear and disappear at the horizon as the wavelength
+    /// changes, and the albedo with them: a factor per wavelength, and a
+    /// wider horizon taper (an order just above the horizon, a Rayleigh
+    /// anomaly, spikes the albedo over a few nm).
+    fn energy_hint(&self) -> crate::models::EnergyHint {
+        crate::models::EnergyHint {
+            wavelength_nodes: 25,
+            per_wavelength: true,
+            horizon_taper_cos: 0.25,
+        }
     }
 
     fn spectral_component(

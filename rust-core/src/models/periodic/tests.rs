@@ -856,7 +856,7 @@ fn broad_rule_node_reflectance_matches_grid() {
             let Some(geom) = PairGeometry::new(wi, wo) else {
                 continue;
             };
-            let with_table = model.reflectance_rgb_with(brdf.fresnel(), &geom, true);
+            let with_table = model.reflectance_rgb_with(&brdf.shading(), &geom, true);
             let plain = model
                 .surface
                 .kernel_rgb(&geom, &|l| brdf.fresnel().reflectance(geom.cos_half, l));

@@ -1,0 +1,145 @@
+//! Tests of the energy-conserving material ("energy": "conserving"): the white furnace (directional
+//! albedo of a white material at most 1 within its Monte Carlo error, for
+//! every model, spectral and RGB luminance, down to grazing incidence),
+//! reciprocity, and Stam's formula where the parameter asks for it.
+
+use super::*;
+use crate::sampling::SplitMix64;
+
+/// White (fresnel = 1) test materials of every model.
+const MATERIALS: [&str; 7] = [
+    r#"{"surface":"cd","fresnel":1,"energy":"conserving"}"#,
+    r#"{"surface":"periodic","period_um":1.2,"coherence_um":20,"profile":"sine","height_um":0.12,"fresnel":1,"energy":"conserving"}"#,
+    r#"{"surface":"gaussian","sigma_um":0.3,"corr_um":2,"fresnel":1,"energy":"conserving"}"#,
+    r#"{"surface":"gaussian","sigma_um":0.08,"corr_um":1.5,"fresnel":1,"energy":"conserving"}"#,
+    r#"{"surface":"gaussian","sigma_um":0.1,"corr_x_um":4,"corr_y_um":0.8,"fresnel":1,"energy":"conserving"}"#,
+    r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.1,"lag_um":2,"fresnel":1,"energy":"conserving"}"#,
+    r#"{"surface":"fractal","hurst":0.4,"sigma_um":0.3,"lag_um":1,"fresnel":1,"energy":"conserving"}"#,
+];
+
+fn direction(cos: f64, phi: f64) -> DVec3 {
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    DVec3::new(sin * phi.cos(), sin * phi.sin(), cos)
+}
+
+/// Mean and standard error of the sample weight (spectral at `lambda`, or
+/// the RGB luminance for None) of `n` samples of the material's strategy.
+fn albedo(brdf: &Brdf, wi: DVec3, lambda: Option<f64>, n: usize, seed: u64) -> (f64, f64) {
+    let strategy = brdf.sampler(wi, lambda);
+    let y = |c: [f64; 3]| -> f64 {
+        spectrum::SRGB_LUMINANCE
+            .iter()
+            .zip(c)
+            .map(|(w, x)| w * x)
+            .sum()
+    };
+    let mut rng = SplitMix64(seed);
+    let (mut sum, mut sum2) = (0.0, 0.0);
+    for _ in 0..n {
+        let s = strategy.sample(rng.three());
+        let w = if !(s.pdf > 0.0) {
+            0.0
+        } else if s.coherent {
+            match lambda {
+                Some(l) => brdf.coherent_spectral(wi, l),
+                None => y(brdf.coherent_rgb(wi)),
+            }
+        } else {
+            let f = match lambda {
+                Some(l) => brdf.eval_spectral(wi, s.wo, l),
+                None => y(brdf.eval_rgb(wi, s.wo)),
+            };
+            f * s.wo.z
+        } / if s.pdf > 0.0 { s.pdf } else { 1.0 };
+        sum += w;
+        sum2 += w * w;
+    }
+    let mean = sum / n as f64;
+    let se = ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt();
+    (mean, se)
+}
+
+/// The conserving material reflects at most what it receives: albedo <= 1 + 3
+/// standard errors at normal, oblique and grazing incidence (cos_i down to
+/// 0.02), at three wavelengths and in RGB (luminance), for every model;
+/// Stam's formula, on the same grid, does not (the test can fail).
+#[test]
+fn white_furnace_conserving_at_most_one() {
+    let mut worst: f64 = 0.0;
+    let mut stam_worst: f64 = 0.0;
+    for (m, json) in MATERIALS.iter().enumerate() {
+        let brdf = Brdf::from_json(json).unwrap();
+        let stam = Brdf::from_json(&json.replace("conserving", "stam")).unwrap();
+        for (k, &cos) in [0.9, 0.5, 0.2, 0.08, 0.02].iter().enumerate() {
+            let wi = direction(cos, 0.4 + 1.3 * k as f64);
+            for lambda in [Some(420.0), Some(560.0), Some(690.0), None] {
+                let seed = (m * 16 + k) as u64;
+                let (a, se) = albedo(&brdf, wi, lambda, 6000, seed);
+                println!("{json} cos {cos} {lambda:?}: {a:.4} +- {se:.4}");
+                assert!(
+                    a <= 1.0 + 3.0 * se,
+                    "{json} cos_i {cos} {lambda:?}: {a} +- {se}"
+                );
+                worst = worst.max(a);
+                stam_worst = stam_worst.max(albedo(&stam, wi, lambda, 2000, seed).0);
+            }
+        }
+    }
+    println!("largest albedo: conserving {worst:.3}, Stam's formula {stam_worst:.3}");
+    assert!(
+        stam_worst > 1.5,
+        "the grid reaches Stam's excess: {stam_worst}"
+    );
+}
+
+/// f(wi, wo) = f(wo, wi) to 1e-5 relative for the conserving material, spectral and
+/// RGB, over random pairs (grazing ones included); values below 1e-12 /sr
+/// (the far tails, where the series is cut at a tolerance) are not
+/// compared.
+#[test]
+fn conserving_is_reciprocal() {
+    let mut rng = SplitMix64(9);
+    let mut worst: f64 = 0.0;
+    for json in MATERIALS {
+        let brdf = Brdf::from_json(json).unwrap();
+        for _ in 0..400 {
+            let wi = direction(0.01 + 0.99 * rng.next_f64(), 6.3 * rng.next_f64());
+            let wo = direction(0.01 + 0.99 * rng.next_f64(), 6.3 * rng.next_f64());
+            let lambda = 360.0 + 470.0 * rng.next_f64();
+            let pairs = [
+                (
+                    brdf.eval_spectral(wi, wo, lambda),
+                    brdf.eval_spectral(wo, wi, lambda),
+                ),
+                (brdf.eval_rgb(wi, wo)[0], brdf.eval_rgb(wo, wi)[0]),
+                (brdf.eval_rgb(wi, wo)[2], brdf.eval_rgb(wo, wi)[2]),
+            ];
+            for (a, b) in pairs {
+                let scale = a.abs().max(b.abs());
+                if scale > 1e-12 {
+                    let e = (a - b).abs() / scale;
+                    worst = worst.max(e);
+                    assert!(e < 1e-5, "{json} {wi} {wo} {lambda}: {a} vs {b}");
+                }
+            }
+        }
+    }
+    println!("reciprocity: worst relative difference {worst:.1e}");
+}
+
+/// Stam's formula is the default and has no table; the conserving
+/// material's table is built lazily and counted in its memory; a bad value
+/// is refused by name.
+#[test]
+fn stam_mode_is_the_default() {
+    let stam = Brdf::from_json(r#"{"surface":"cd"}"#).unwrap();
+    assert!(stam.energy_table().is_none());
+    let brdf = Brdf::from_json(r#"{"surface":"cd","energy":"conserving"}"#).unwrap();
+    let before = brdf.memory_bytes();
+    let table = brdf.energy_table().unwrap();
+    assert_eq!(brdf.memory_bytes(), before + table.memory_bytes());
+    let e = Brdf::from_json(r#"{"surface":"cd","energy":"loud"}"#)
+        .err()
+        .unwrap();
+    assert!(e.message.contains("'energy'"), "{}", e.message);
+}
