@@ -23,10 +23,8 @@ use crate::optics::geometry::{normalize_direction, PairGeometry, MIN_COS};
 use crate::sampling::{rgb_sampling_nodes, Component, Components, Lobe, Mixture, SampleResult};
 use crate::special::finite_non_negative;
 use crate::spectrum::{in_band, wavenumber_per_um};
-use fractal::Fractal;
 use gaussian::Gaussian;
 use glam::DVec3;
-use periodic::Periodic;
 use serde_json::{Map, Value};
 use smallvec::smallvec;
 
@@ -95,10 +93,31 @@ pub struct EnergyHint {
     pub horizon_taper_cos: f64,
 }
 
+/// A model's parameters as the material reads them.
+pub trait ModelParams: Sized {
+    /// The values of the key 'surface' that name this model.
+    const SURFACE_NAMES: &'static [&'static str];
+
+    /// The parameters of the surface named `surface` (one of
+    /// SURFACE_NAMES), from the reader's keys.
+    fn parse(surface: &str, reader: &Reader) -> Result<Self, StamError>;
+
+    /// Node count of the RGB rule for spectrally smooth kernels (0: the
+    /// model integrates its spectrum itself).
+    fn rgb_nodes(&self) -> usize {
+        0
+    }
+}
+
 /// What each surface model provides to the material.
 pub trait SurfaceModel: Sized {
+    /// Its parameters.
+    type Params: ModelParams;
     /// The lobes of its sampling strategies.
     type Lobe: Lobe<Model = Self>;
+
+    /// The model of `params`, with the tables it needs from the Fresnel term.
+    fn from_params(params: &Self::Params, fresnel: &Fresnel) -> Result<Self, StamError>;
 
     /// STAM_FLAG_* bits.
     fn flags(&self) -> u32;
@@ -191,35 +210,89 @@ pub trait SurfaceModel: Sized {
     }
 }
 
-/// `match` on a model-tagged value, the same expression in every arm.
-macro_rules! dispatch {
-    ($value:expr, $enum:ident, $m:ident => $body:expr) => {
-        match $value {
-            $enum::Gaussian($m) => $body,
-            $enum::Fractal($m) => $body,
-            $enum::Periodic($m) => $body,
+/// The closed set of models: one line each. It defines `Surface` (a
+/// material's model), `Strategy` (its sampling strategy at one incident
+/// direction), `SurfaceParams` (its parameters) and `dispatch!`, the one
+/// `match` on the model that every method of those types goes through.
+macro_rules! surface_models {
+    ($d:tt $($name:ident => $module:ident :: $model:ident),+ $(,)?) => {
+        /// A material's surface model.
+        pub enum Surface {
+            $($name($module::$model),)+
+        }
+
+        /// The sampling strategy for one incident direction and one mode,
+        /// built once and used for any number of samples and pdf
+        /// evaluations.
+        pub enum Strategy<'a> {
+            $($name(Mixture<'a, <$module::$model as SurfaceModel>::Lobe>),)+
+        }
+
+        /// The surface parameters of a material, by model.
+        #[derive(Clone, Debug, PartialEq)]
+        pub enum SurfaceParams {
+            $($name(<$module::$model as SurfaceModel>::Params),)+
+        }
+
+        $(
+            impl<'a> From<Mixture<'a, <$module::$model as SurfaceModel>::Lobe>> for Strategy<'a> {
+                fn from(m: Mixture<'a, <$module::$model as SurfaceModel>::Lobe>) -> Self {
+                    Strategy::$name(m)
+                }
+            }
+        )+
+
+        /// `match` on a model-tagged value, the same expression in every arm.
+        macro_rules! dispatch {
+            ($d value:expr, $d tag:ident, $d m:ident => $d body:expr) => {
+                match $d value {
+                    $($d tag::$name($d m) => $d body,)+
+                }
+            };
+        }
+
+        impl Surface {
+            /// The model of `params`, with the tables it needs from the
+            /// Fresnel term.
+            pub fn new(params: &SurfaceParams, fresnel: &Fresnel) -> Result<Surface, StamError> {
+                Ok(match params {
+                    $(SurfaceParams::$name(p) => Surface::$name($module::$model::from_params(p, fresnel)?),)+
+                })
+            }
+        }
+
+        impl SurfaceParams {
+            /// Every value of the key 'surface', in the models' order.
+            fn surface_names() -> Vec<&'static str> {
+                let mut names = Vec::new();
+                $(names.extend_from_slice(
+                    <<$module::$model as SurfaceModel>::Params as ModelParams>::SURFACE_NAMES,
+                );)+
+                names
+            }
+
+            /// The parameters of the model that `surface` names.
+            fn parse_named(surface: &str, reader: &Reader) -> Option<Result<SurfaceParams, StamError>> {
+                $({
+                    type P = <$module::$model as SurfaceModel>::Params;
+                    if <P as ModelParams>::SURFACE_NAMES.contains(&surface) {
+                        return Some(<P as ModelParams>::parse(surface, reader).map(SurfaceParams::$name));
+                    }
+                })+
+                None
+            }
         }
     };
 }
 
-/// A material's surface model.
-pub enum Surface {
-    Gaussian(Gaussian),
-    Fractal(Fractal),
-    Periodic(Periodic),
+surface_models! {
+    $
+    Gaussian => gaussian::Gaussian,
+    Fractal => fractal::Fractal,
+    Periodic => periodic::Periodic,
 }
 
 impl Surface {
-    /// The model of `params`, with the tables it needs from the Fresnel
-    /// term and the RGB rule.
-    pub fn new(params: &SurfaceParams, fresnel: &Fresnel) -> Result<Surface, StamError> {
-        Ok(match params {
-            SurfaceParams::Gaussian(p) => Surface::Gaussian(Gaussian::new(p)),
-            SurfaceParams::Fractal(p) => Surface::Fractal(Fractal::new(p)?),
-            SurfaceParams::Periodic(p) => Surface::Periodic(Periodic::new(p, fresnel)?),
-        })
-    }
-
     pub fn flags(&self) -> u32 {
         dispatch!(self, Surface, m => m.flags())
     }
@@ -277,32 +350,6 @@ impl Surface {
     }
 }
 
-/// The sampling strategy for one incident direction and one mode, built once
-/// and used for any number of samples and pdf evaluations.
-pub enum Strategy<'a> {
-    Gaussian(Mixture<'a, gaussian::Lobe>),
-    Fractal(Mixture<'a, fractal::Lobe>),
-    Periodic(Mixture<'a, periodic::Lobe>),
-}
-
-impl<'a> From<Mixture<'a, gaussian::Lobe>> for Strategy<'a> {
-    fn from(m: Mixture<'a, gaussian::Lobe>) -> Self {
-        Strategy::Gaussian(m)
-    }
-}
-
-impl<'a> From<Mixture<'a, fractal::Lobe>> for Strategy<'a> {
-    fn from(m: Mixture<'a, fractal::Lobe>) -> Self {
-        Strategy::Fractal(m)
-    }
-}
-
-impl<'a> From<Mixture<'a, periodic::Lobe>> for Strategy<'a> {
-    fn from(m: Mixture<'a, periodic::Lobe>) -> Self {
-        Strategy::Periodic(m)
-    }
-}
-
 impl Strategy<'_> {
     /// Discrete probability of choosing the coherent lobe.
     pub fn coherent_probability(&self) -> f64 {
@@ -325,17 +372,6 @@ impl Strategy<'_> {
     }
 }
 
-/// The surface parameters of a material, by model.
-#[derive(Clone, Debug, PartialEq)]
-pub enum SurfaceParams {
-    Gaussian(gaussian::GaussianParams),
-    Fractal(fractal::FractalParams),
-    Periodic(periodic::PeriodicParams),
-}
-
-/// The accepted values of the key 'surface'.
-const SURFACE_NAMES: &str = "\"gaussian\", \"fractal\", \"periodic\", \"cd\"";
-
 impl SurfaceParams {
     /// The surface named by the object's 'surface' key, with its model's
     /// keys; `material_keys` are the keys the material itself reads, which
@@ -344,41 +380,36 @@ impl SurfaceParams {
         obj: &Map<String, Value>,
         material_keys: &[&str],
     ) -> Result<SurfaceParams, StamError> {
+        let names = Self::surface_names()
+            .iter()
+            .map(|n| format!("\"{n}\""))
+            .collect::<Vec<_>>()
+            .join(", ");
         let surface = match obj.get("surface") {
             None => {
                 return Err(StamError::new(format!(
-                    "missing parameter 'surface' (accepted: {SURFACE_NAMES})"
+                    "missing parameter 'surface' (accepted: {names})"
                 )))
             }
             Some(Value::String(s)) => s.as_str(),
             Some(other) => {
                 return Err(StamError::new(format!(
-                    "parameter 'surface' must be a string ({SURFACE_NAMES}), got {}",
+                    "parameter 'surface' must be a string ({names}), got {}",
                     type_name(other)
                 )))
             }
         };
         let reader = Reader::new(obj, surface, material_keys);
-        Ok(match surface {
-            "gaussian" => SurfaceParams::Gaussian(gaussian::GaussianParams::parse(&reader)?),
-            "fractal" => SurfaceParams::Fractal(fractal::FractalParams::parse(&reader)?),
-            "periodic" => SurfaceParams::Periodic(periodic::PeriodicParams::parse(&reader, false)?),
-            "cd" => SurfaceParams::Periodic(periodic::PeriodicParams::parse(&reader, true)?),
-            other => {
-                return Err(StamError::new(format!(
-                    "unknown surface '{other}' for parameter 'surface' (accepted: {SURFACE_NAMES})"
-                )))
-            }
+        Self::parse_named(surface, &reader).unwrap_or_else(|| {
+            Err(StamError::new(format!(
+                "unknown surface '{surface}' for parameter 'surface' (accepted: {names})"
+            )))
         })
     }
 
     /// Node count of the RGB rule for spectrally smooth kernels (0: the
     /// model integrates its spectrum itself).
     pub fn rgb_nodes(&self) -> usize {
-        match self {
-            SurfaceParams::Gaussian(p) => p.rgb_nodes,
-            SurfaceParams::Fractal(p) => p.rgb_nodes,
-            SurfaceParams::Periodic(_) => 0,
-        }
+        dispatch!(self, SurfaceParams, p => p.rgb_nodes())
     }
 }

@@ -92,7 +92,15 @@ impl Fractal {
 }
 
 impl SurfaceModel for Fractal {
+    type Params = FractalParams;
     type Lobe = Lobe;
+
+    fn from_params(
+        p: &FractalParams,
+        _: &crate::optics::fresnel::Fresnel,
+    ) -> Result<Fractal, StamError> {
+        Fractal::new(p)
+    }
 
     fn flags(&self) -> u32 {
         FLAG_SPECTRALLY_VARYING

@@ -28,8 +28,14 @@ pub struct FractalParams {
     pub rgb_nodes: usize,
 }
 
-impl FractalParams {
-    pub fn parse(r: &Reader) -> Result<FractalParams, StamError> {
+impl crate::models::ModelParams for FractalParams {
+    const SURFACE_NAMES: &'static [&'static str] = &["fractal"];
+
+    fn rgb_nodes(&self) -> usize {
+        self.rgb_nodes
+    }
+
+    fn parse(_surface: &str, r: &Reader) -> Result<FractalParams, StamError> {
         r.check_keys(&["hurst", "sigma_um", "lag_um", "rgb_nodes"])?;
         Ok(FractalParams {
             hurst: r.required("hurst", range::HURST, false, "")?,

@@ -43,10 +43,12 @@ pub use series::{
     poisson_series_saddle, SeriesSettings, DEFAULT_SERIES_TOLERANCE,
 };
 
+use crate::error::StamError;
 use crate::models::{
     Shading, SurfaceModel, FLAG_ANISOTROPIC, FLAG_HAS_COHERENT, FLAG_SPECTRALLY_VARYING,
     MAX_RGB_NODES,
 };
+use crate::optics::fresnel::Fresnel;
 use crate::optics::geometry::PairGeometry;
 use crate::sampling::{Component, StrategyTable};
 use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM};
@@ -137,7 +139,12 @@ impl Gaussian {
 }
 
 impl SurfaceModel for Gaussian {
+    type Params = GaussianParams;
     type Lobe = Lobe;
+
+    fn from_params(p: &GaussianParams, _: &Fresnel) -> Result<Gaussian, StamError> {
+        Ok(Gaussian::new(p))
+    }
 
     fn flags(&self) -> u32 {
         let anisotropic = if self.surface.isotropic {

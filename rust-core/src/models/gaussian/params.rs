@@ -30,8 +30,14 @@ pub struct GaussianParams {
 
 const _: () = assert!(range::RGB_NODES.1 <= MAX_RGB_NODES);
 
-impl GaussianParams {
-    pub fn parse(r: &Reader) -> Result<GaussianParams, StamError> {
+impl crate::models::ModelParams for GaussianParams {
+    const SURFACE_NAMES: &'static [&'static str] = &["gaussian"];
+
+    fn rgb_nodes(&self) -> usize {
+        self.rgb_nodes
+    }
+
+    fn parse(_surface: &str, r: &Reader) -> Result<GaussianParams, StamError> {
         r.check_keys(&[
             "sigma_um",
             "corr_um",

@@ -127,7 +127,12 @@ impl Periodic {
 }
 
 impl SurfaceModel for Periodic {
+    type Params = PeriodicParams;
     type Lobe = Lobe;
+
+    fn from_params(p: &PeriodicParams, fresnel: &Fresnel) -> Result<Periodic, StamError> {
+        Periodic::new(p, fresnel)
+    }
 
     fn flags(&self) -> u32 {
         FLAG_ANISOTROPIC | FLAG_SPECTRALLY_VARYING

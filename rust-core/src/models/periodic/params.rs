@@ -35,10 +35,12 @@ fn err(msg: String) -> StamError {
     StamError::new(msg)
 }
 
-impl PeriodicParams {
-    /// `compact_disc`: the surface 'cd', whose keys default to the paper's disc.
-    pub fn parse(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, StamError> {
-        parse_periodic(r, compact_disc)
+impl crate::models::ModelParams for PeriodicParams {
+    /// "cd": the paper's compact disc, whose keys default to its values.
+    const SURFACE_NAMES: &'static [&'static str] = &["periodic", "cd"];
+
+    fn parse(surface: &str, r: &Reader) -> Result<PeriodicParams, StamError> {
+        parse_periodic(r, surface == "cd")
     }
 }
 
