@@ -16,8 +16,9 @@ static ACCEPTED: AtomicU64 = AtomicU64::new(0);
 static REFUSED: AtomicU64 = AtomicU64::new(0);
 
 /// Every key the parameters know (docs/parameters.md).
-const KEYS: [&str; 18] = [
+const KEYS: [&str; 19] = [
     "surface",
+    "energy",
     "sigma_um",
     "corr_um",
     "corr_x_um",
