@@ -55,12 +55,6 @@ impl Shading<'_> {
         }
         self.rgb_rule.integrate(self.fresnel, cos, values)
     }
-
-    /// The pair's factor at lambda_nm (1 without one).
-    #[inline]
-    pub fn factor(&self, lambda_nm: f64) -> f64 {
-        self.pair_factor.map_or(1.0, |f| f(lambda_nm))
-    }
 }
 
 /// f(lambda) = F^2 G K(k) for a pair, with the Fresnel term at the pair's
