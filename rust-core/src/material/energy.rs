@@ -5,11 +5,12 @@
 //! (cos_i cos_o) grows without bound towards grazing directions, so a
 //! white material (F = 1) can reflect more light than it receives there
 //! (a compact disc seen at cos_i 0.08: twice as much). The conserving
-//! material scales f by m(wi, lambda) m(wo, lambda): symmetric in wi and wo
-//! (reciprocity is kept), 1 wherever the white material's albedo leaves
-//! room, so Stam's formula is unchanged there, and applied inside the
-//! wavelength integration of the RGB path, so that RGB stays the projection
-//! of the spectral f.
+//! material scales f by t(cos_i) t(cos_o) m(wi, lambda) m(wo, lambda):
+//! symmetric in wi and wo (reciprocity is kept), 1 wherever the white
+//! material's albedo leaves room, so Stam's formula is unchanged there, and
+//! applied inside the wavelength integration of the RGB path, so that RGB
+//! stays the projection of the spectral f (Gaussian and fractal surfaces
+//! keep one colour-neutral m, their albedo being smooth in wavelength).
 //!
 //! m comes from the white material's own transfer between directions: T[a][b]
 //! is the part of the light arriving from cell a that leaves into cell b
@@ -23,9 +24,10 @@
 //! most `target` whatever the iteration reached. Between wavelength nodes m
 //! is interpolated linearly.
 //!
-//! Before the table, a horizon taper t(cos_i) t(cos_o) (t = 1 from
-//! a model-given cosine on (0.1; 0.25 for gratings), smoothly to 0 at the horizon, like the masking of
-//! any real surface there) removes the divergence of G ~ 1 / cos_o: without
+//! Before the table, the horizon taper t (1 from a model-given cosine on,
+//! 0.1 or 0.25 for gratings, then smoothly to 0 at the horizon, like the
+//! masking of any real surface there) removes the divergence of
+//! G ~ 1 / cos_o: without
 //! it a grating order emerging at the horizon (a Rayleigh anomaly) makes the
 //! albedo spike over a few nm and a few tenths of a degree, finer than any
 //! table.
@@ -41,10 +43,11 @@ use crate::sampling::SplitMix64;
 use glam::DVec3;
 use std::f64::consts::PI;
 
-/// What the default may reflect from any direction, below 1 by the table's
+/// What the material may reflect from any direction, below 1 by the table's
 /// margin: its transfer rows are Monte Carlo estimates (a few 0.1% of
 /// noise), and m is interpolated between the cells the bound holds for.
 const TARGET_ALBEDO: f64 = 0.99;
+
 /// The horizon taper at a direction's cosine: 1 from `from_cos` on, below
 /// it t = 3 x^2 - 2 x^3 with x = cos / from_cos, smoothly to 0 (t / cos
 /// stays bounded).
