@@ -54,24 +54,53 @@ def _font(size):
     return ImageFont.load_default()
 
 
-def contact_sheet(path, items, columns=4, tile=256, title=None):
-    """items: list of (label, PNG path). Writes one labelled PNG."""
+def _wrap(draw, text, font, width):
+    """Greedy word wrap of one line of text to `width` pixels."""
+    out, cur = [], ''
+    for word in text.split(' '):
+        trial = (cur + ' ' + word).strip()
+        if cur and draw.textlength(trial, font=font) > width:
+            out.append(cur)
+            cur = word
+        else:
+            cur = trial
+    if cur:
+        out.append(cur)
+    return out
+
+
+def contact_sheet(path, items, columns=4, tile=256, title=None, font_size=14):
+    """items: list of (label, PNG path). Writes one labelled PNG: each image
+    fitted into a tile x tile cell (aspect kept), its label word-wrapped to the
+    cell's width below it, every row as tall as its longest label."""
+    pad, line_h = 8, font_size + 5
+    f_label, f_title = _font(font_size), _font(18)
+    probe = ImageDraw.Draw(Image.new('RGB', (1, 1)))
+    wrapped = []
+    for label, _ in items:
+        lines = []
+        for para in label.split('\n'):
+            lines += _wrap(probe, para, f_label, tile - 4)
+        wrapped.append(lines)
     rows = (len(items) + columns - 1) // columns
-    label_h, title_h, pad = 38, (36 if title else 0), 6
+    row_h = [tile + 6 + line_h * max(len(w) for w in wrapped[r * columns:(r + 1) * columns])
+             for r in range(rows)]
+    title_lines = _wrap(probe, title, f_title, columns * (tile + pad) - pad) if title else []
+    title_h = 26 * len(title_lines) + (8 if title else 0)
     sheet = Image.new('RGB', (columns * (tile + pad) + pad,
-                              title_h + rows * (tile + label_h + pad) + pad), (24, 24, 24))
+                              title_h + sum(row_h) + pad * (rows + 1)), (24, 24, 24))
     draw = ImageDraw.Draw(sheet)
-    f_label, f_title = _font(13), _font(18)
-    if title:
-        draw.text((pad, 8), title, fill=(235, 235, 235), font=f_title)
-    for n, (label, png) in enumerate(items):
+    for k, line in enumerate(title_lines):
+        draw.text((pad, 8 + 26 * k), line, fill=(235, 235, 235), font=f_title)
+    for n, ((label, png), lines) in enumerate(zip(items, wrapped)):
         r, c = divmod(n, columns)
         x = pad + c * (tile + pad)
-        y = title_h + pad + r * (tile + label_h + pad)
+        y = title_h + pad + sum(row_h[:r]) + pad * r
         im = Image.open(png).convert('RGB')
-        im.thumbnail((tile, tile))
+        im.thumbnail((tile, tile), Image.LANCZOS)
         sheet.paste(im, (x + (tile - im.width) // 2, y + (tile - im.height) // 2))
-        for k, line in enumerate(label.split('\n')[:2]):
-            draw.text((x + 2, y + tile + 3 + 16 * k), line, fill=(235, 235, 235), font=f_label)
+        for k, line in enumerate(lines):
+            draw.text((x + 2, y + tile + 4 + line_h * k), line, fill=(235, 235, 235),
+                      font=f_label)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     sheet.save(path)
