@@ -5,8 +5,12 @@
 #   make plugin   Mitsuba BSDF plugin: build/plugins/diffraction.so
 #   make setup    system packages + .venv (scripts/setup.sh)
 #   make render-tool  the Rust-only reference renderer: target/release/stam-render
-#   make demo     setup, core, plugin, then render scenes/ to out/gallery/ (PNG, EXR,
-#                 contact_sheet.png; scripts/render_gallery.py)
+#   make demo     setup, core, plugin, then render the paper's subjects (scenes/hero_*.xml)
+#                 to out/gallery/ (PNG, EXR, contact_sheet.png; scripts/render_gallery.py,
+#                 docs/gallery.md)
+#   make animation  the talk's animations on a local Dask cluster of ANIM_WORKERS
+#                 processes: out/animation/{cd,brushed}/ (frames, MP4, GIF;
+#                 scripts/render_animation.py, docs/animation.md)
 #   make compare  Mitsuba vs Rust-only comparison to out/compare/ (scripts/compare.py;
 #                 exits non-zero when a check fails)
 #   make guide    the pictures of docs/guide.md: docs/img/guide/*.png
@@ -54,13 +58,20 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint bench bench-render stress furnace FORCE
+.PHONY: all demo animation compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint bench bench-render stress furnace FORCE
 all: plugin
 
 demo: setup plugin
 	@start=$$(date +%s); \
 	$(PYTHON) scripts/render_gallery.py && \
 	echo "[demo] done: out/gallery/contact_sheet.png (renders $$(( $$(date +%s) - start )) s)"
+
+# The compact disc turning under the strip lights, a lamp circling over brushed metal.
+ANIM_WORKERS ?= 2
+ANIM_ARGS    ?= --frames 48 --res 320 --spp 48
+animation: setup plugin
+	$(PYTHON) scripts/render_animation.py --scene cd $(ANIM_ARGS) --workers $(ANIM_WORKERS)
+	$(PYTHON) scripts/render_animation.py --scene brushed $(ANIM_ARGS) --workers $(ANIM_WORKERS)
 
 compare: setup plugin render-tool
 	$(PYTHON) scripts/compare.py
