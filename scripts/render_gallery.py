@@ -53,7 +53,7 @@ HEROES = [
     ('hero_sweep', 'hero_sweep.xml', 'scalar_rgb',
      'Gaussian spheres, T 0.5 um, sigma 0.003 / 0.012 / 0.025 / 0.05 / 0.15 um: '
      'mirror, diffraction halos, rough',
-     dict(res=512, width=1152, spp=96), 99.5),
+     dict(res=512, width=1152, spp=100), 99.5),
     ('hero_brushed', 'hero_brushed.xml', 'scalar_rgb',
      'Brushed aluminium disc, concentric: sigma 0.08, T 1 um across, 30 um along',
      dict(res=512, spp=128), 98.0),
