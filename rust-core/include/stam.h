@@ -129,6 +129,15 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 #define STAM_SRGB_LUMINANCE_G 0.7152
 #define STAM_SRGB_LUMINANCE_B 0.0722
 
+/* JIT export (prototype; layout and rule "gaussian-v1" in docs/jit.md):
+ * the tables over universal variables and the parameters from which a
+ * renderer that traces its code (Dr.Jit) evaluates the material's diffuse
+ * f with array operations. Returns the number of floats of the export, 0
+ * when the material has none (only Gaussian surfaces with Stam's formula
+ * have one) or b is NULL; writes them to out only when out is not NULL and
+ * capacity is at least that number (call with out = NULL to size it). */
+size_t stam_brdf_export_table(const StamBrdf *b, float *out, size_t capacity);
+
 /* Plausibility warnings of the material's parameters, one per line (no
  * trailing newline), "" when there are none or b is NULL: values that were
  * accepted but are almost surely a unit mistake or make the model

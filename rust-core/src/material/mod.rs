@@ -10,6 +10,7 @@
 pub mod energy;
 #[cfg(test)]
 mod energy_tests;
+pub mod jit;
 pub mod params;
 pub mod plausibility;
 #[cfg(test)]

@@ -335,7 +335,16 @@ impl Surface {
         dispatch!(self, Surface, m => m.mixture_strategy(shading, wi, lambdas).into())
     }
 
-    /// The Gaussian model, if this is one (tests and the accuracy survey).
+    /// The Gaussian model, if this is one (tests, the accuracy survey, the
+    /// JIT export).
+    pub fn gaussian(&self) -> Option<&Gaussian> {
+        match self {
+            Surface::Gaussian(g) => Some(g),
+            _ => None,
+        }
+    }
+
+    /// The same, mutable.
     pub fn gaussian_mut(&mut self) -> Option<&mut Gaussian> {
         match self {
             Surface::Gaussian(g) => Some(g),

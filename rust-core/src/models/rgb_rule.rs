@@ -77,6 +77,26 @@ impl RgbRule {
         self.k_per_um.len() * 8 + self.fresnel_weights.len() * 24
     }
 
+    /// The rule's weights with F^2 folded in, as the JIT export hands them
+    /// out (docs/jit.md): `FRESNEL_COS_BINS` + 1 rows (cos = b / bins) of
+    /// one triple per node, linear in cos between rows; for a wavelength-flat
+    /// Fresnel term, the plain weights times F^2 at the row's cosine (where
+    /// `integrate` takes F^2 at the exact cosine). Returns (bins, rows).
+    pub fn export_weights(&self, fresnel: &Fresnel) -> (usize, Vec<[f64; 3]>) {
+        if !self.fresnel_weights.is_empty() {
+            return (FRESNEL_COS_BINS, self.fresnel_weights.clone());
+        }
+        let rows = (0..=FRESNEL_COS_BINS)
+            .flat_map(|b| {
+                let r = fresnel.reflectance(b as f64 / FRESNEL_COS_BINS as f64, 550.0);
+                self.rule.weights[..self.len()]
+                    .iter()
+                    .map(move |w| w.map(|c| c * r))
+            })
+            .collect();
+        (FRESNEL_COS_BINS, rows)
+    }
+
     /// sum_j values[j] F^2(cos, lambda_j) w_jc, with F^2 folded as above.
     #[inline]
     pub fn integrate(&self, fresnel: &Fresnel, cos: f64, values: &[f64]) -> [f64; 3] {

@@ -188,6 +188,94 @@ impl MetalGrid {
     }
 }
 
+/// A Fresnel term as a reflectance grid (`Fresnel::export_grid`), in the
+/// layout the JIT export (docs/jit.md) hands to renderers: rows at
+/// increasing wavelengths, each F at sqrt(cos) = 0, 1/`EXPORT_COS_STEPS`,
+/// ..., 1 (Catmull-Rom over the columns with the end columns repeated,
+/// linear between rows), and for each whole nanometre from the first row
+/// the index of the last row at or below it.
+pub struct FresnelGridExport {
+    pub lambda_nm: Vec<f64>,
+    pub rows: Vec<[f64; EXPORT_COS_STEPS + 1]>,
+    pub row_of_nm: Vec<u16>,
+}
+
+/// Column intervals of an exported Fresnel row (the grid's).
+pub const EXPORT_COS_STEPS: usize = GRID_COS_STEPS;
+
+impl FresnelGridExport {
+    /// The most rows past `row_of_nm` that a lookup steps over (the
+    /// rows at measured wavelengths inside one nanometre).
+    pub fn max_row_steps(&self) -> usize {
+        let xs = &self.lambda_nm;
+        let mut most = 0;
+        for (d, &r) in self.row_of_nm.iter().enumerate() {
+            // The largest wavelength mapped to this entry.
+            let top = (xs[0] + d as f64 + 1.0).min(xs[xs.len() - 1]);
+            let mut r = r as usize;
+            let mut steps = 0;
+            while r + 2 < xs.len() && xs[r + 1] <= top {
+                r += 1;
+                steps += 1;
+            }
+            most = most.max(steps);
+        }
+        most
+    }
+}
+
+impl Fresnel {
+    /// This Fresnel term as a grid: a metal's own grid exactly (the one
+    /// `reflectance` reads); a constant reflectance as two equal rows at
+    /// 360 and 830 nm (exact); a constant complex index as two rows of its
+    /// reflectance at the columns' cosines (Catmull-Rom between them: below
+    /// 2.5e-5 absolute, as the metals' grids).
+    /// `band` is the wavelength range (nm) the rows of a term without a
+    /// grid cover (every whole nanometre when it varies with wavelength).
+    pub fn export_grid(&self, band: (f64, f64)) -> FresnelGridExport {
+        let to_f64 = |row: &[f32; GRID_ROW]| -> [f64; EXPORT_COS_STEPS + 1] {
+            std::array::from_fn(|j| row[j + 1] as f64)
+        };
+        if let Fresnel::Metal {
+            grid: Some(grid), ..
+        } = self
+        {
+            return FresnelGridExport {
+                lambda_nm: grid.lambda_nm.clone(),
+                rows: grid.rows.iter().map(to_f64).collect(),
+                row_of_nm: grid.row_of_nm.clone(),
+            };
+        }
+        let (lo, hi) = band;
+        let row = |lambda: f64| -> [f64; EXPORT_COS_STEPS + 1] {
+            std::array::from_fn(|j| {
+                let root = j as f64 / GRID_COS_STEPS as f64;
+                self.reflectance(root * root, lambda) as f32 as f64
+            })
+        };
+        let span = (hi - lo).ceil() as usize;
+        let lambda_nm: Vec<f64> = if self.is_spectrally_flat() {
+            vec![lo, hi]
+        } else {
+            (0..=span).map(|d| (lo + d as f64).min(hi)).collect()
+        };
+        let last = lambda_nm.len() - 2;
+        FresnelGridExport {
+            rows: lambda_nm.iter().map(|&l| row(l)).collect(),
+            row_of_nm: (0..=span)
+                .map(|d| {
+                    if lambda_nm.len() == 2 {
+                        0
+                    } else {
+                        d.min(last) as u16
+                    }
+                })
+                .collect(),
+            lambda_nm,
+        }
+    }
+}
+
 /// One grid row: F at sqrt(cos) = 0, 1/GRID_COS_STEPS, ..., 1 for the
 /// metal's index at lambda_nm, padded as MetalGrid::rows describes.
 fn grid_row(table: &MetalTable, lambda_nm: f64) -> [f32; GRID_ROW] {

@@ -40,7 +40,8 @@ pub(crate) use rgb::RgbNodeTable;
 pub use sampling::Lobe;
 pub use series::{
     poisson_series, poisson_series_asymptotic, poisson_series_exact, poisson_series_reference,
-    poisson_series_saddle, SeriesSettings, DEFAULT_SERIES_TOLERANCE,
+    poisson_series_saddle, series_table_export, SeriesSettings, SeriesTableExport,
+    DEFAULT_SERIES_TOLERANCE,
 };
 
 use crate::error::StamError;

@@ -336,6 +336,39 @@ pub(super) fn series_table() -> &'static SeriesTable {
     })
 }
 
+/// The universal table as the JIT export hands it to renderers
+/// (docs/jit.md): coefficient (r, c) of the bicubic B-spline sits at
+/// ln g = `ln_g_min` + (r - 1) `d_ln_g`, rho = (c - 1) `d_rho`; the table
+/// serves `g_min` <= g < `g_max` and rho < `rho_max`.
+pub struct SeriesTableExport {
+    pub ln_g_min: f64,
+    pub d_ln_g: f64,
+    pub n_g: usize,
+    pub d_rho: f64,
+    pub n_rho: usize,
+    pub g_min: f64,
+    pub g_max: f64,
+    pub rho_max: f64,
+    /// n_g rows of n_rho coefficients of ln S, row-major.
+    pub coefficients: &'static [f32],
+}
+
+/// The universal series table (built on first use) for the JIT export.
+pub fn series_table_export() -> SeriesTableExport {
+    let t = series_table();
+    SeriesTableExport {
+        ln_g_min: t.ln_g_min,
+        d_ln_g: TABLE_D_LN_G,
+        n_g: t.n_g,
+        d_rho: TABLE_D_ROOT_X,
+        n_rho: t.n_root_x,
+        g_min: TABLE_G_MIN,
+        g_max: TABLE_G_MAX,
+        rho_max: TABLE_ROOT_X_MAX,
+        coefficients: &t.ln_s,
+    }
+}
+
 /// Prefilters a row-major grid of samples (`rows` x `cols` points of
 /// `lanes` values each) along both directions into bicubic B-spline
 /// coefficients.
