@@ -5,6 +5,7 @@ BSDF, in llvm_ad_rgb with Dr.Jit's DEFAULT flags (symbolic loops and calls).
     .venv/bin/python scripts/jit_prototype.py accuracy
     .venv/bin/python scripts/jit_prototype.py bench [--spp 48] [--processes 3]
     .venv/bin/python scripts/jit_prototype.py freeze
+    .venv/bin/python scripts/jit_prototype.py chi2
     .venv/bin/python scripts/jit_prototype.py render <gaussian|gaussian4|roughconductor|native_evaluated> SPP
 
 accuracy: max relative error of the Dr.Jit evaluation against the core
@@ -246,7 +247,7 @@ class StamJitBSDF(mi.BSDF):
         ok = active & (mi.Frame3f.cos_theta(wi) > 0.0) & (mi.Frame3f.cos_theta(wo) > 0.0)
         return dr.select(ok & dr.isfinite(p), p, 0.0)
 
-    def sample(self, ctx, si, sample1, sample2, active):
+    def sample(self, ctx, si, sample1, sample2, active=True):
         wi = si.wi
         use_cos = sample1 < self.p_cos
         m, _ = self._distr().sample(wi, sample2)
@@ -263,14 +264,14 @@ class StamJitBSDF(mi.BSDF):
         ok = active & (bs.pdf > 0.0)
         return bs, dr.select(ok, f / bs.pdf, 0.0)
 
-    def eval(self, ctx, si, wo, active):
+    def eval(self, ctx, si, wo, active=True):
         f = self.rule.eval_rgb(si.wi, wo) * mi.Frame3f.cos_theta(wo)
         return dr.select(active, f, 0.0)
 
-    def pdf(self, ctx, si, wo, active):
+    def pdf(self, ctx, si, wo, active=True):
         return self._pdf(si.wi, wo, active)
 
-    def eval_pdf(self, ctx, si, wo, active):
+    def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
     def traverse(self, callback):
@@ -461,15 +462,34 @@ def freeze_check(spp=8):
     }))
 
 
+def chi2_check():
+    """Mitsuba's chi-square test of the prototype's sampling against its pdf
+    (chi2_gaussian of tests/materials.json) at normal, oblique and grazing
+    incidence."""
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
+    params = json.dumps({'surface': 'gaussian', 'sigma_um': 0.15, 'corr_um': 0.8})
+    for z in (1.0, 0.5, 0.1):
+        wi = [(1 - z * z) ** 0.5, 0.0, z]
+        sample_func, pdf_func = BSDFAdapter(
+            'stam_jit', '<string name="params" value=\'%s\'/>' % params, wi=wi)
+        test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func,
+                             pdf_func=pdf_func, sample_dim=3)
+        ok = test.run()
+        print(json.dumps({'wi_z': z, 'passed': bool(ok),
+                          'result': test.messages.strip().splitlines()[-1]}))
+
+
 if __name__ == '__main__':
     ap = argparse.ArgumentParser()
-    ap.add_argument('what', choices=['accuracy', 'bench', 'render', 'freeze'])
+    ap.add_argument('what', choices=['accuracy', 'bench', 'render', 'freeze', 'chi2'])
     ap.add_argument('args', nargs='*')
     ap.add_argument('--spp', type=int, default=48)
     ap.add_argument('--processes', type=int, default=3)
     a = ap.parse_args()
     if a.what == 'accuracy':
         accuracy()
+    elif a.what == 'chi2':
+        chi2_check()
     elif a.what == 'freeze':
         freeze_check()
     elif a.what == 'bench':
