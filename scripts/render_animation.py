@@ -15,6 +15,8 @@ Scenes (ANIMATIONS below):
   brushed  scenes/hero_brushed.xml: a small lamp circling once over the disc
            of concentrically brushed aluminium: the stretched highlight turns
            with it.
+  brushed_sigma  a parameter sweep: the brushed disc with sigma from 0.02 to
+           0.3 um, frame by frame.
 
 Writes DIR/frame_NNNN.exr (linear) and DIR/frame_NNNN.png (one exposure for
 the whole animation, sRGB), then DIR/NAME.mp4 (H.264 through imageio-ffmpeg's
@@ -61,26 +63,33 @@ ROOT = os.path.dirname(HERE)
 # function of t in [0, 1) (the animation loops), exposure of the PNGs and video.
 ANIMATIONS = {
     'cd': dict(
-        scene='hero_cd.xml', variant='scalar_rgb', exposure=0.55,
+        scene='hero_cd.xml', variant='scalar_rgb', exposure=0.16,
         description='compact disc, tilted 14 degrees, turning once under the strip lights',
         fixed={},
         frame=lambda t: {'tilt': 14.0, 'turn': 360.0 * t, 'spin': -360.0 * t,
                          'lift': 6.0 * math.sin(math.radians(14.0)) + 0.08}),
     'brushed': dict(
-        scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.6,
+        scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.0,
         description='a lamp circling once over concentrically brushed aluminium',
         fixed={},
         frame=lambda t: {'light_az': 360.0 * t}),
+    # A parameter sweep rather than a loop: t runs from 0 to 1 inclusive.
+    'brushed_sigma': dict(
+        scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.0, loop=False,
+        description='brushed disc, sigma swept from 0.02 to 0.3 um (geometric)',
+        fixed={'light_az': 35.0},
+        frame=lambda t: {'sigma': 0.02 * 15.0 ** t}),
 }
 
 DEFAULTS = dict(frames=48, res=256, spp=64, fps=24)
 
 
 def frame_params(name, k, frames):
-    """Scene parameters of frame k of `frames` (all values as strings)."""
+    """Scene parameters of frame k of `frames` (all values as strings): t = k /
+    frames for loops, k / (frames - 1) for sweeps (loop=False)."""
     a = ANIMATIONS[name]
     p = dict(a['fixed'])
-    p.update(a['frame'](k / frames))
+    p.update(a['frame'](k / frames if a.get('loop', True) else k / max(frames - 1, 1)))
     return {key: ('%.9g' % v if isinstance(v, float) else str(v)) for key, v in p.items()}
 
 
@@ -125,8 +134,9 @@ def render_frame(name, k, frames, res, spp, out_dir, exposure, root=ROOT):
 
 
 def settings(name, frames, res, spp):
-    return dict(scene=name, frames=frames, res=res, spp=spp,
-                scene_file=ANIMATIONS[name]['scene'], variant=ANIMATIONS[name]['variant'])
+    a = ANIMATIONS[name]
+    return dict(scene=name, frames=frames, res=res, spp=spp, scene_file=a['scene'],
+                variant=a['variant'], exposure=a['exposure'])
 
 
 def pending_frames(out_dir, name, frames, res, spp):
