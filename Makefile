@@ -66,9 +66,9 @@ demo: setup plugin
 	$(PYTHON) scripts/render_gallery.py && \
 	echo "[demo] done: out/gallery/contact_sheet.png (renders $$(( $$(date +%s) - start )) s)"
 
-# The compact disc turning under the strip lights, a lamp circling over brushed metal.
+# The compact disc turning under the strip lights, a lamp swinging over brushed metal.
 ANIM_WORKERS ?= 2
-ANIM_ARGS    ?= --frames 48 --res 320 --spp 48
+ANIM_ARGS    ?= --frames 48 --res 320 --spp 64
 animation: setup plugin
 	$(PYTHON) scripts/render_animation.py --scene cd $(ANIM_ARGS) --workers $(ANIM_WORKERS)
 	$(PYTHON) scripts/render_animation.py --scene brushed $(ANIM_ARGS) --workers $(ANIM_WORKERS)

@@ -12,9 +12,9 @@ Scenes (ANIMATIONS below):
   cd       scenes/hero_cd.xml: the compact disc, tilted by 14 degrees, turning
            once about the vertical under the studio's strip lights: the
            rainbow arcs of its orders sweep round the disc.
-  brushed  scenes/hero_brushed.xml: a small lamp circling once over the disc
-           of concentrically brushed aluminium: the stretched highlight turns
-           with it.
+  brushed  scenes/hero_brushed.xml: a small lamp swinging 130 degrees either
+           way round the disc of concentrically brushed aluminium and back:
+           the stretched highlight turns with it.
   brushed_sigma  a parameter sweep: the brushed disc with sigma from 0.02 to
            0.3 um, frame by frame.
 
@@ -70,9 +70,10 @@ ANIMATIONS = {
                          'lift': 6.0 * math.sin(math.radians(14.0)) + 0.08}),
     'brushed': dict(
         scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.0,
-        description='a lamp circling once over concentrically brushed aluminium',
+        description='a lamp swinging round the brushed aluminium disc and back',
         fixed={},
-        frame=lambda t: {'light_az': 360.0 * t}),
+        # 130 degrees either way: further round, the lamp would pass the camera
+        frame=lambda t: {'light_az': 130.0 * math.sin(2 * math.pi * t)}),
     # A parameter sweep rather than a loop: t runs from 0 to 1 inclusive.
     'brushed_sigma': dict(
         scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.0, loop=False,

@@ -56,7 +56,7 @@ HEROES = [
      dict(res=512, width=1152, spp=100), 99.5),
     ('hero_brushed', 'hero_brushed.xml', 'scalar_rgb',
      'Brushed aluminium disc, concentric: sigma 0.08, T 1 um across, 30 um along',
-     dict(res=512, spp=128), 98.0),
+     dict(res=512, spp=132), 98.0),
     ('hero_fractal', 'hero_fractal.xml', 'scalar_rgb',
      'Fractal silver, sigma 0.05 um over 1 um, H 0.5: sphere and plate',
      dict(res=512, spp=224), 99.5),
