@@ -12,7 +12,7 @@ Scenes (ANIMATIONS below):
   cd       scenes/hero_cd.xml: the compact disc, tilted by 14 degrees, turning
            once about the vertical under the studio's strip lights: the
            rainbow arcs of its orders sweep round the disc.
-  brushed  scenes/hero_brushed.xml: a small lamp swinging 130 degrees either
+  brushed  scenes/hero_brushed.xml: a small lamp swinging 75 degrees either
            way round the disc of concentrically brushed aluminium and back:
            the stretched highlight turns with it.
   brushed_sigma  a parameter sweep: the brushed disc with sigma from 0.02 to
@@ -43,7 +43,8 @@ Guarantees (tests/test_animation.py):
     name and renamed when complete, and Dask reschedules the tasks of a lost
     worker (up to --retries times per frame);
   * a re-run renders only the frames not on disk (resume); frames rendered
-    with other settings (render.json) are rendered again.
+    with other settings (render.json: size, samples, exposure, every frame's
+    scene parameters) are rendered again.
 """
 
 import argparse
@@ -72,8 +73,9 @@ ANIMATIONS = {
         scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.0,
         description='a lamp swinging round the brushed aluminium disc and back',
         fixed={},
-        # 130 degrees either way: further round, the lamp would pass the camera
-        frame=lambda t: {'light_az': 130.0 * math.sin(2 * math.pi * t)}),
+        # 75 degrees either way: the streak stays in view (further round, the
+        # lamp ends up on the camera's side, and at 180 degrees in front of it)
+        frame=lambda t: {'light_az': 75.0 * math.sin(2 * math.pi * t)}),
     # A parameter sweep rather than a loop: t runs from 0 to 1 inclusive.
     'brushed_sigma': dict(
         scene='hero_brushed.xml', variant='scalar_rgb', exposure=1.0, loop=False,
@@ -135,9 +137,14 @@ def render_frame(name, k, frames, res, spp, out_dir, exposure, root=ROOT):
 
 
 def settings(name, frames, res, spp):
+    """What the frames on disk were rendered with (render.json): a change of
+    any of it, the scene parameters of any frame included, renders all again."""
     a = ANIMATIONS[name]
+    per_frame = json.dumps([frame_params(name, k, frames) for k in range(frames)],
+                           sort_keys=True)
     return dict(scene=name, frames=frames, res=res, spp=spp, scene_file=a['scene'],
-                variant=a['variant'], exposure=a['exposure'])
+                variant=a['variant'], exposure=a['exposure'],
+                frame_params_sha256=hashlib.sha256(per_frame.encode()).hexdigest())
 
 
 def pending_frames(out_dir, name, frames, res, spp):
@@ -236,6 +243,10 @@ def render(name, frames, res, spp, out_dir, client=None, root=ROOT, retries=3,
     missing = [k for k in range(frames) if not os.path.exists(frame_paths(out_dir, k)[0])]
     if missing:
         raise RuntimeError('frames missing after the run: %s' % missing)
+    # what a worker killed while writing a frame left behind
+    for f in os.listdir(out_dir):
+        if f.startswith('frame_') and '.tmp.' in f:
+            os.remove(os.path.join(out_dir, f))
     return results
 
 

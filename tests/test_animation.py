@@ -74,6 +74,17 @@ def test_two_workers_match_in_process(reference, client, tmp_path):
     again = ra.render('cd', 6, 24, 8, out, client=client, progress=False)
     assert sorted(again) == [3] and again[3][4] == ref[3]
 
+    # other settings: every frame again
+    rec = ra.settings('cd', 6, 24, 8)
+    monkey = dict(ra.ANIMATIONS['cd'])
+    ra.ANIMATIONS['cd_other'] = dict(monkey, frame=lambda t: {'tilt': 10.0})
+    try:
+        assert ra.settings('cd_other', 6, 24, 8)['frame_params_sha256'] != \
+            rec['frame_params_sha256']
+    finally:
+        del ra.ANIMATIONS['cd_other']
+    assert len(ra.pending_frames(out, 'cd', 6, 24, 16)) == 6     # other spp
+
     # the video and the GIF: one frame per rendered frame
     import imageio_ffmpeg
     from PIL import Image
