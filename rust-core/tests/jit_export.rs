@@ -10,37 +10,9 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use glam::DVec3;
+use stam::material::jit::slot;
 use stam::Brdf;
 use std::f64::consts::PI;
-
-/// Header slots of the export (docs/jit.md, "Layout").
-mod slot {
-    pub const FORMAT: usize = 0;
-    pub const MODEL: usize = 1;
-    pub const TOTAL_LEN: usize = 3;
-    pub const SIGMA_UM: usize = 4;
-    pub const CORR_X_UM: usize = 5;
-    pub const CORR_Y_UM: usize = 6;
-    pub const LAMBDA_MIN_NM: usize = 7;
-    pub const LAMBDA_MAX_NM: usize = 8;
-    pub const SERIES_OFFSET: usize = 9;
-    pub const SERIES_N_G: usize = 10;
-    pub const SERIES_N_RHO: usize = 11;
-    pub const SERIES_LN_G_MIN: usize = 12;
-    pub const SERIES_D_LN_G: usize = 13;
-    pub const SERIES_D_RHO: usize = 14;
-    pub const SERIES_G_MIN: usize = 15;
-    pub const SERIES_G_MAX: usize = 16;
-    pub const SERIES_RHO_MAX: usize = 17;
-    pub const FRESNEL_OFFSET: usize = 18;
-    pub const FRESNEL_ROWS: usize = 19;
-    pub const FRESNEL_COS_STEPS: usize = 20;
-    pub const FRESNEL_LAMBDA_OFFSET: usize = 21;
-    pub const FRESNEL_ROW_OF_NM_OFFSET: usize = 22;
-    pub const FRESNEL_ROW_OF_NM_LEN: usize = 23;
-    pub const FRESNEL_MAX_ROW_STEPS: usize = 24;
-    pub const SMALL_G_TERMS: usize = 29;
-}
 
 /// The rule "gaussian-v1" of docs/jit.md, spelled out on plain f64.
 struct Rule<'a> {
