@@ -138,6 +138,36 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
  * capacity is at least that number (call with out = NULL to size it). */
 size_t stam_brdf_export_table(const StamBrdf *b, float *out, size_t capacity);
 
+/* Programs for renderers that trace their code (Dr.Jit's symbolic loops
+ * and calls, dr.freeze, CUDA; docs/jit.md): straight-line array operations
+ * and the tables they read, which compute what the functions above compute.
+ * Layout of the float array and the operation codes: docs/jit.md (format
+ * 2). Each kind takes its inputs and gives its outputs in this order
+ * (directions in the local frame, lambda in nm, u uniforms in [0, 1)):
+ *   EVAL_RGB          wi[3] wo[3]        -> f R, G, B (no cos, no coherent lobe)
+ *   EVAL_SPECTRAL     wi[3] wo[3] lambda -> f
+ *   PDF_RGB           wi[3] wo[3]        -> glossy density at wo (RGB strategy)
+ *   PDF_SPECTRAL      wi[3] wo[3] lambda -> glossy density (lambda's strategy)
+ *   SAMPLE_RGB        wi[3] u[3]         -> wo[3], coherent (1 or 0)
+ *   SAMPLE_SPECTRAL   wi[3] u[3] lambda  -> wo[3], coherent
+ *   COHERENT_RGB      wi[3]              -> coherent R, G, B, its probability
+ *   COHERENT_SPECTRAL wi[3] lambda       -> coherent reflectance, probability
+ * A glossy sample's density is PDF's at its wo; a coherent one's is the
+ * probability. Returns the number of floats, 0 when the material has no
+ * program of that kind or b is NULL; writes them to out only when out is
+ * not NULL and capacity suffices (call with out = NULL to size it). */
+#define STAM_PROGRAM_EVAL_RGB 0u
+#define STAM_PROGRAM_EVAL_SPECTRAL 1u
+#define STAM_PROGRAM_PDF_RGB 2u
+#define STAM_PROGRAM_PDF_SPECTRAL 3u
+#define STAM_PROGRAM_SAMPLE_RGB 4u
+#define STAM_PROGRAM_SAMPLE_SPECTRAL 5u
+#define STAM_PROGRAM_COHERENT_RGB 6u
+#define STAM_PROGRAM_COHERENT_SPECTRAL 7u
+#define STAM_PROGRAM_KINDS 8u
+size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
+                                size_t capacity);
+
 /* Plausibility warnings of the material's parameters, one per line (no
  * trailing newline), "" when there are none or b is NULL: values that were
  * accepted but are almost surely a unit mistake or make the model

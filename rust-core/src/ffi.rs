@@ -588,6 +588,34 @@ pub unsafe extern "C" fn stam_brdf_export_table(
 }
 
 /// # Safety
+/// `b` NULL or valid; `out` NULL or valid for `capacity` floats.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_export_program(
+    b: *const StamBrdf,
+    kind: u32,
+    out: *mut f32,
+    capacity: usize,
+) -> usize {
+    if b.is_null() {
+        return 0;
+    }
+    catch_unwind(AssertUnwindSafe(|| {
+        let Some(kind) = crate::material::program::ProgramKind::from_code(kind) else {
+            return 0;
+        };
+        let Some(program) = (*b).brdf.program(kind) else {
+            return 0;
+        };
+        let encoded = program.encode();
+        if !out.is_null() && capacity >= encoded.len() {
+            std::ptr::copy_nonoverlapping(encoded.as_ptr(), out, encoded.len());
+        }
+        encoded.len()
+    }))
+    .unwrap_or(0)
+}
+
+/// # Safety
 /// `b` NULL or valid. The string lives as long as the material.
 #[no_mangle]
 pub unsafe extern "C" fn stam_brdf_warnings(b: *const StamBrdf) -> *const c_char {

@@ -16,6 +16,7 @@ mod json;
 pub mod material;
 pub mod models;
 pub mod optics;
+pub mod program;
 pub mod sampling;
 pub mod special;
 pub mod spectrum;

@@ -13,6 +13,9 @@ mod energy_tests;
 pub mod jit;
 pub mod params;
 pub mod plausibility;
+pub mod program;
+#[cfg(test)]
+mod program_tests;
 #[cfg(test)]
 mod sampling_tests;
 #[cfg(test)]

@@ -12,8 +12,10 @@
 pub mod fractal;
 pub mod gaussian;
 pub mod periodic;
+pub mod program;
 mod rgb_rule;
 
+pub use program::{SampleProgram, SurfacePrograms};
 pub use rgb_rule::{RgbRule, MAX_RGB_NODES};
 
 use crate::error::StamError;
@@ -104,7 +106,7 @@ pub trait ModelParams: Sized {
 }
 
 /// What each surface model provides to the material.
-pub trait SurfaceModel: Sized {
+pub trait SurfaceModel: Sized + SurfacePrograms {
     /// Its parameters.
     type Params: ModelParams;
     /// The lobes of its sampling strategies.
@@ -303,6 +305,11 @@ impl Surface {
     #[inline]
     pub fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
         dispatch!(self, Surface, m => m.reflectance_rgb(shading, geom))
+    }
+
+    /// The model's programs (`program::SurfacePrograms`).
+    pub fn programs(&self) -> &dyn SurfacePrograms {
+        dispatch!(self, Surface, m => m as &dyn SurfacePrograms)
     }
 
     pub fn energy_hint(&self) -> EnergyHint {

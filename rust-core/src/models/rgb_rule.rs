@@ -2,6 +2,7 @@
 //! coherent lobe), shared by the models that use it.
 
 use crate::optics::fresnel::Fresnel;
+use crate::program::{lookup, Builder, Value};
 use crate::spectrum::{self, SmoothRule};
 use std::f64::consts::PI;
 
@@ -122,5 +123,46 @@ impl RgbRule {
             }
         }
         acc
+    }
+
+    /// `integrate` as program operations: sum_j values[j] w_jc(cos) with
+    /// F^2 folded in as there (a wavelength-flat Fresnel term at the exact
+    /// cosine times the plain weights; otherwise the folded weights, linear
+    /// between the cosine rows).
+    pub fn integrate_program<'a>(
+        &self,
+        b: &'a Builder,
+        fresnel: &Fresnel,
+        cos: Value<'a>,
+        values: &[Value<'a>],
+    ) -> [Value<'a>; 3] {
+        let n = self.len();
+        let acc = |weight: &dyn Fn(usize, usize) -> Value<'a>| -> [Value<'a>; 3] {
+            std::array::from_fn(|c| {
+                lookup::sum(b, values.iter().enumerate().map(|(j, &v)| v * weight(j, c)))
+            })
+        };
+        if self.fresnel_weights.is_empty() {
+            let r = fresnel.program(b, cos, b.c(550.0));
+            let w = &self.rule.weights;
+            return acc(&|j, c| b.c(w[j][c])).map(|a| a * r);
+        }
+        let table = b.table(
+            self.fresnel_weights
+                .iter()
+                .flat_map(|w| w.map(|c| c as f32))
+                .collect(),
+        );
+        let cos = cos.finite().select(cos, 0.0);
+        let t = cos.clamp(0.0, 1.0) * FRESNEL_COS_BINS as f64;
+        let row = t.floor().min((FRESNEL_COS_BINS - 1) as f64);
+        let frac = t - row;
+        let base = row * (3 * n) as f64;
+        acc(&|j, c| {
+            let at = base + (3 * j + c) as f64;
+            let w0 = b.gather(table, at);
+            let w1 = b.gather(table, at + (3 * n) as f64);
+            w0 + (w1 - w0) * frac
+        })
     }
 }

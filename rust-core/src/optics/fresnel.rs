@@ -508,6 +508,30 @@ pub fn conductor_reflectance(cos_theta: f64, eta: f64, k: f64) -> f64 {
     }
 }
 
+/// `conductor_reflectance` as program operations (crate::program).
+pub fn conductor_reflectance_program<'a>(
+    b: &'a crate::program::Builder,
+    cos_theta: crate::program::Value<'a>,
+    eta: f64,
+    k: f64,
+) -> crate::program::Value<'a> {
+    let c = cos_theta.finite().select(cos_theta, 0.0).clamp(0.0, 1.0);
+    let c2 = c * c;
+    let s2 = 1.0 - c2;
+    let (eta2, k2) = (eta * eta, k * k);
+    let t0 = (eta2 - k2) - s2;
+    let a2_plus_b2 = (t0 * t0 + 4.0 * eta2 * k2).sqrt();
+    let a = ((a2_plus_b2 + t0) * 0.5).max(0.0).sqrt();
+    let t1 = a2_plus_b2 + c2;
+    let t2 = a * c * 2.0;
+    let rs = (t1 - t2) / (t1 + t2);
+    let t3 = c2 * a2_plus_b2 + s2 * s2;
+    let t4 = t2 * s2;
+    let rp = rs * (t3 - t4) / (t3 + t4);
+    let r = (rs + rp) * 0.5;
+    r.finite().select(r.clamp(0.0, 1.0), b.c(1.0))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,3 +7,5 @@ pub mod geometry;
 /// Optical constants (eta, k) of aluminium, silver, gold, copper and chromium
 /// at 350..850 nm, generated from Mitsuba 3's data files.
 pub mod metals;
+/// The pair geometry and Fresnel lookups as program operations.
+pub mod program;

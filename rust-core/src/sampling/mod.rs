@@ -8,6 +8,7 @@
 
 mod band;
 mod mixture;
+pub mod program;
 mod rng;
 mod table;
 pub mod warps;

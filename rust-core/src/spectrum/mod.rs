@@ -90,6 +90,15 @@ pub fn gamut_map(rgb: [f64; 3]) -> [f64; 3] {
     let s = min / (min - y);
     rgb.map(|c| c + s * (y - c))
 }
+/// `gamut_map` as program operations (crate::program).
+pub fn gamut_map_program(rgb: [crate::program::Value; 3]) -> [crate::program::Value; 3] {
+    let min = rgb[0].min(rgb[1]).min(rgb[2]);
+    let y = rgb[0] * SRGB_LUMINANCE[0] + rgb[1] * SRGB_LUMINANCE[1] + rgb[2] * SRGB_LUMINANCE[2];
+    let s = min / (min - y);
+    let inside = min.ge(0.0) | !min.finite();
+    let dark = !y.gt(0.0);
+    rgb.map(|c| inside.select(c, dark.select(0.0, c + s * (y - c))))
+}
 /// Lowest wavenumber of the band, 1000 / 830 (1/um).
 pub const NU_MIN_PER_UM: f64 = 1000.0 / LAMBDA_MAX_NM;
 /// Highest wavenumber of the band, 1000 / 360 (1/um).

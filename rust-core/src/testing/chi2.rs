@@ -195,14 +195,39 @@ pub struct Fit {
     pub coherent: f64,
 }
 
+/// What the chi-square test needs of a sampler: the core's strategies, or
+/// a material's exported sampling programs (testing::programs).
+pub trait Sampler {
+    fn sample(&self, rnd: [f64; 3]) -> SampleResult;
+    fn pdf(&self, wo: DVec3) -> f64;
+    fn coherent_probability(&self) -> f64;
+}
+
+impl Sampler for Strategy<'_> {
+    fn sample(&self, rnd: [f64; 3]) -> SampleResult {
+        Strategy::sample(self, rnd)
+    }
+    fn pdf(&self, wo: DVec3) -> f64 {
+        Strategy::pdf(self, wo)
+    }
+    fn coherent_probability(&self) -> f64 {
+        Strategy::coherent_probability(self)
+    }
+}
+
 /// Goodness of fit of `sampler.sample` against `sampler.pdf`; also checks
 /// every sample (unit wo above the horizon, finite pdf equal to pdf(wo)).
-pub fn chi2_fit(sampler: &Strategy, seed: u64, n: usize) -> Fit {
+pub fn chi2_fit(sampler: &dyn Sampler, seed: u64, n: usize) -> Fit {
     chi2_fit_against(sampler, sampler, seed, n)
 }
 
 /// Samples from `sampler`, expected counts from `reference`'s pdf.
-pub fn chi2_fit_against(sampler: &Strategy, reference: &Strategy, seed: u64, n: usize) -> Fit {
+pub fn chi2_fit_against(
+    sampler: &dyn Sampler,
+    reference: &dyn Sampler,
+    seed: u64,
+    n: usize,
+) -> Fit {
     let start = std::time::Instant::now();
     let mut rng = Rng(seed);
     let check = |s: &SampleResult| {

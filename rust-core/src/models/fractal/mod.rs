@@ -49,6 +49,7 @@ mod build;
 mod math;
 pub mod params;
 mod profile;
+mod program;
 mod sampling;
 #[cfg(test)]
 mod tests;

@@ -29,6 +29,7 @@
 //! the tests (all below 4e-5 relative).
 
 pub mod params;
+mod program;
 mod rgb;
 mod sampling;
 mod series;

@@ -50,6 +50,7 @@
 
 mod orders;
 pub mod params;
+mod program;
 mod sampling;
 #[cfg(test)]
 mod tests;

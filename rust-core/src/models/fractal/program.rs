@@ -1,0 +1,7 @@
+//! The fractal model's programs for tracing renderers (crate::program,
+//! docs/jit.md): the same physics as its native path, as array operations.
+
+use super::Fractal;
+use crate::models::SurfacePrograms;
+
+impl SurfacePrograms for Fractal {}

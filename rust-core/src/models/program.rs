@@ -1,0 +1,103 @@
+//! What a surface model exports for a tracing renderer: its part of the
+//! material's programs (crate::program, docs/jit.md). Each model implements
+//! `SurfacePrograms` in its folder (`program.rs`), beside its physics, and
+//! its tests run the programs against its native path. A method left at
+//! its default (None) means the model has no such program: the material
+//! then exports none of that kind, and the renderer says so.
+
+use super::Shading;
+use crate::optics::program::{PairProgram, Vec3};
+use crate::program::{Builder, Mask, Value};
+
+/// A sampled direction (a unit vector; anything below the horizon is a
+/// failed sample) and whether it is the coherent lobe's mirror direction.
+pub struct SampleProgram<'a> {
+    pub wo: Vec3<'a>,
+    pub coherent: Mask<'a>,
+}
+
+/// A model's programs. Directions are unit vectors above the horizon (the
+/// material checks them and zeroes its outputs elsewhere); wavelengths are
+/// inside the band where a model's output matters (outside it the material
+/// zeroes f). `lambda_nm` None is the RGB mode.
+pub trait SurfacePrograms {
+    /// K at wavenumber k (1/um): f = F^2 G K.
+    fn kernel_program<'a>(
+        &self,
+        _b: &'a Builder,
+        _pair: &PairProgram<'a>,
+        _k_per_um: Value<'a>,
+    ) -> Option<Value<'a>> {
+        None
+    }
+
+    /// `reflectance_rgb`: F^2 K integrated against the linear sRGB
+    /// matching functions (f / G), before gamut mapping.
+    fn reflectance_rgb_program<'a>(
+        &self,
+        _b: &'a Builder,
+        _shading: &Shading,
+        _pair: &PairProgram<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        None
+    }
+
+    /// The coherent lobe's reflectance at incidence cosine cos_i (in-band
+    /// lambda), as `coherent_spectral`; models without one keep 0.
+    fn coherent_spectral_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        _cos_i: Value<'a>,
+        _lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        Some(b.c(0.0))
+    }
+
+    /// `coherent_rgb`, before gamut mapping.
+    fn coherent_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        _cos_i: Value<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        Some([b.c(0.0); 3])
+    }
+
+    /// The probability that sampling at wi picks the coherent lobe.
+    fn coherent_probability_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        _wi: Vec3<'a>,
+        _lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        Some(b.c(0.0))
+    }
+
+    /// One sample at wi from three uniforms; the glossy part must have
+    /// the density `pdf_program` gives.
+    fn sample_program<'a>(
+        &self,
+        _b: &'a Builder,
+        _shading: &Shading,
+        _wi: Vec3<'a>,
+        _lambda_nm: Option<Value<'a>>,
+        _u: [Value<'a>; 3],
+    ) -> Option<SampleProgram<'a>> {
+        None
+    }
+
+    /// The solid-angle density of `sample_program`'s glossy samples at wo
+    /// (that is, already times 1 - the coherent probability).
+    fn pdf_program<'a>(
+        &self,
+        _b: &'a Builder,
+        _shading: &Shading,
+        _wi: Vec3<'a>,
+        _wo: Vec3<'a>,
+        _lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        None
+    }
+}

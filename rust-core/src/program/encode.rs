@@ -1,0 +1,145 @@
+//! A program as one f32 array (the ABI's `stam_brdf_export_program`):
+//!
+//! | values | meaning |
+//! |---|---|
+//! | 0..HEADER_LEN | FORMAT, inputs, outputs, instructions, tables, total length, 0, 0 |
+//! | outputs | the output registers |
+//! | 2 per table | offset (from the array's start) and length |
+//! | 4 per instruction | op code, a, b, c (Const: a is the value itself) |
+//! | the tables' values | |
+//!
+//! Integers are stored as floats (exact below 2^24; `decode` checks).
+
+use super::builder::{arity, operands};
+use super::{Instr, Op, Program};
+
+/// Version of the layout and of the operation set.
+pub const FORMAT: u32 = 2;
+/// Values before the outputs.
+pub const HEADER_LEN: usize = 8;
+
+impl Program {
+    /// The program as one f32 array.
+    pub fn encode(&self) -> Vec<f32> {
+        let n_out = self.outputs.len();
+        let n_tab = self.tables.len();
+        let n_code = self.code.len();
+        let dir = HEADER_LEN + n_out;
+        let code_at = dir + 2 * n_tab;
+        let data_at = code_at + 4 * n_code;
+        let total = data_at + self.table_len();
+        let mut v = Vec::with_capacity(total);
+        v.extend([
+            FORMAT as f32,
+            self.n_inputs as f32,
+            n_out as f32,
+            n_code as f32,
+            n_tab as f32,
+            total as f32,
+            0.0,
+            0.0,
+        ]);
+        v.extend(self.outputs.iter().map(|&o| o as f32));
+        let mut offset = data_at;
+        for t in &self.tables {
+            v.extend([offset as f32, t.len() as f32]);
+            offset += t.len();
+        }
+        for ins in &self.code {
+            let a = match ins.op {
+                Op::Const => f32::from_bits(ins.a),
+                _ => ins.a as f32,
+            };
+            v.extend([ins.op as u32 as f32, a, ins.b as f32, ins.c as f32]);
+        }
+        for t in &self.tables {
+            v.extend_from_slice(t);
+        }
+        debug_assert_eq!(v.len(), total);
+        v
+    }
+}
+
+/// The program of an array made by `encode`, checked: every operand a
+/// register defined before its use and of the right kind (float or mask),
+/// every table inside the array. None for anything else.
+pub fn decode(v: &[f32]) -> Option<Program> {
+    let int = |x: f32| -> Option<u32> {
+        ((0.0..16_777_216.0).contains(&x) && x.fract() == 0.0).then_some(x as u32)
+    };
+    if v.len() < HEADER_LEN || int(v[0])? != FORMAT {
+        return None;
+    }
+    let n_inputs = int(v[1])?;
+    let n_out = int(v[2])? as usize;
+    let n_code = int(v[3])? as usize;
+    let n_tab = int(v[4])? as usize;
+    let total = int(v[5])? as usize;
+    if total != v.len() {
+        return None;
+    }
+    let dir = HEADER_LEN + n_out;
+    let code_at = dir + 2 * n_tab;
+    if code_at + 4 * n_code > total {
+        return None;
+    }
+    let mut tables = Vec::with_capacity(n_tab);
+    for t in 0..n_tab {
+        let off = int(v[dir + 2 * t])? as usize;
+        let len = int(v[dir + 2 * t + 1])? as usize;
+        if off < code_at + 4 * n_code || off + len > total {
+            return None;
+        }
+        tables.push(v[off..off + len].to_vec());
+    }
+    let mut code = Vec::with_capacity(n_code);
+    let mut is_mask = Vec::with_capacity(n_code);
+    for i in 0..n_code {
+        let w = &v[code_at + 4 * i..code_at + 4 * i + 4];
+        let op = Op::from_code(int(w[0])?)?;
+        let a = if op == Op::Const {
+            w[1].to_bits()
+        } else {
+            int(w[1])?
+        };
+        let ins = Instr {
+            op,
+            a,
+            b: int(w[2])?,
+            c: int(w[3])?,
+        };
+        match op {
+            Op::Input if a >= n_inputs => return None,
+            Op::Gather if a as usize >= n_tab => return None,
+            _ => {}
+        }
+        // Operand kinds: masks where the operation takes masks.
+        let wants_mask = |k: usize| match op {
+            Op::And | Op::Or | Op::Not => true,
+            Op::Select => k == 0,
+            _ => false,
+        };
+        for (k, r) in operands(&ins).into_iter().enumerate() {
+            if r as usize >= i || is_mask[r as usize] != wants_mask(k) {
+                return None;
+            }
+        }
+        let _ = arity(op);
+        is_mask.push(op.gives_mask());
+        code.push(ins);
+    }
+    let mut outputs = Vec::with_capacity(n_out);
+    for k in 0..n_out {
+        let r = int(v[HEADER_LEN + k])?;
+        if r as usize >= n_code || is_mask[r as usize] {
+            return None;
+        }
+        outputs.push(r);
+    }
+    Some(Program {
+        n_inputs,
+        code,
+        outputs,
+        tables,
+    })
+}

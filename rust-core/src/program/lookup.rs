@@ -1,0 +1,61 @@
+//! Table lookups written as program operations: the interpolation rules
+//! the core's native tables use, so that a model's program reads its
+//! exported tables exactly as its native code does.
+
+use super::{Builder, Table, Value};
+
+/// Uniform cubic B-spline weights of t in [0, 1] for the nodes i-1 .. i+2.
+pub fn bspline_weights(t: Value) -> [Value; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    let u = 1.0 - t;
+    [
+        u * u * u * (1.0 / 6.0),
+        t3 * 0.5 - t2 + 2.0 / 3.0,
+        t3 * -0.5 + (t2 + t) * 0.5 + 1.0 / 6.0,
+        t3 * (1.0 / 6.0),
+    ]
+}
+
+/// Catmull-Rom weights of t in [0, 1] for the nodes i-1 .. i+2.
+pub fn catmull_rom_weights(t: Value) -> [Value; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        (t2 - t3 * 0.5 - t * 0.5),
+        t3 * 1.5 - t2 * 2.5 + 1.0,
+        t3 * -1.5 + t2 * 2.0 + t * 0.5,
+        (t3 - t2) * 0.5,
+    ]
+}
+
+/// Sum of values.
+pub fn sum<'a>(b: &'a Builder, values: impl IntoIterator<Item = Value<'a>>) -> Value<'a> {
+    values
+        .into_iter()
+        .reduce(|a, v| a + v)
+        .unwrap_or_else(|| b.c(0.0))
+}
+
+/// Linear interpolation in `table[offset .. offset + n]`, whose entry j is
+/// at x0 + j dx; x clamped to the table's range.
+pub fn uniform_linear<'a>(
+    b: &'a Builder,
+    table: Table,
+    offset: usize,
+    n: usize,
+    x0: f64,
+    dx: f64,
+    x: Value<'a>,
+) -> Value<'a> {
+    if n == 1 {
+        return b.gather(table, b.c(offset as f64));
+    }
+    let f = ((x - x0) * (1.0 / dx)).clamp(0.0, (n - 1) as f64);
+    let i = f.floor().min((n - 2) as f64);
+    let t = f - i;
+    let at = i + offset as f64;
+    let lo = b.gather(table, at);
+    let hi = b.gather(table, at + 1.0);
+    lo + (hi - lo) * t
+}
