@@ -166,7 +166,8 @@ def scene_dict(mi, cfg, film='hdrfilm'):
 
 
 def render_mitsuba(variant, cfg, film='hdrfilm', seed=0):
-    mi = stam_mitsuba.setup(variant)
+    # JIT variants in Mitsuba's default (symbolic) mode
+    mi = stam_mitsuba.setup(variant, evaluated=False)
     scene = mi.load_dict(scene_dict(mi, cfg, film))
     t0 = time.time()
     img = np.array(mi.render(scene, seed=seed), dtype=np.float64)
@@ -247,15 +248,18 @@ def save_triptych(path, title, test, ref, mask, test_label='Mitsuba',
 # ---------------------------------------------------------------------------
 
 def check_image(model, check, size, subpixels, out_dir=OUT_DIR, cie_step_nm=None,
-                pictures=True):
-    """One Mitsuba-vs-Rust-only comparison. check: 'rgb', 'spectral' or 'bands'."""
+                pictures=True, jit=False):
+    """One Mitsuba-vs-Rust-only comparison. check: 'rgb', 'spectral' or 'bands';
+    jit: in llvm_ad_rgb / llvm_ad_spectral with Dr.Jit's default flags (the
+    plugin executing the core's programs) instead of scalar_rgb / scalar_spectral."""
+    prefix = 'llvm_ad_' if jit else 'scalar_'
     if check == 'rgb':
-        variant, film, mode = 'scalar_rgb', 'hdrfilm', 'rgb'
+        variant, film, mode = prefix + 'rgb', 'hdrfilm', 'rgb'
     elif check == 'spectral':
         cie_step_nm = cie_step_nm or CIE_STEP_NM[model]
-        variant, film, mode = 'scalar_spectral', 'hdrfilm', {'cie_step_nm': cie_step_nm}
+        variant, film, mode = prefix + 'spectral', 'hdrfilm', {'cie_step_nm': cie_step_nm}
     elif check == 'bands':
-        variant, film, mode = 'scalar_spectral', 'bands', {'wavelengths_nm': list(BANDS_NM)}
+        variant, film, mode = prefix + 'spectral', 'bands', {'wavelengths_nm': list(BANDS_NM)}
     else:
         raise ValueError(check)
     cfg = config(model, size, size, subpixels, mode)
@@ -300,7 +304,8 @@ def check_image(model, check, size, subpixels, out_dir=OUT_DIR, cie_step_nm=None
         title = ('%s, %s (%s, %dx%d, %d spp): rel. RMSE %.3g %%, worst pixel %.3g %% of peak'
                  % (model, check, variant, size, size, subpixels ** 2,
                     100 * res['rel_rmse'], 100 * res['worst']))
-        save_triptych(os.path.join(out_dir, '%s_%s.png' % (model, check)), title,
+        save_triptych(os.path.join(out_dir, '%s_%s%s.png' % (model, check, '_jit' if jit else '')),
+                      title,
                       test, ref, mask)
     return res
 
@@ -600,6 +605,8 @@ def main(argv=None):
     ap.add_argument('--quick', action='store_true', help='small images (CI)')
     ap.add_argument('--no-slices', action='store_true')
     ap.add_argument('--out', default=OUT_DIR)
+    ap.add_argument('--no-jit', action='store_true',
+                    help='skip the llvm_ad_rgb / llvm_ad_spectral rows')
     ap.add_argument('--write-docs', action='store_true',
                     help='also write the report to docs/compare.md')
     args = ap.parse_args(argv)
@@ -631,14 +638,20 @@ def main(argv=None):
                        100 * r['rel_l1']))
         else:
             msg = 'max rel. difference %.2g' % r['max_rel_diff']
-        print('[compare] %-15s %-16s %s  %s' % (r['model'], r['check'], msg,
-                                                'ok' if r['ok'] else 'FAIL'), flush=True)
+        print('[compare] %-15s %-16s %-17s %s  %s' % (r['model'], r['check'],
+                                                     r.get('variant', ''), msg,
+                                                     'ok' if r['ok'] else 'FAIL'), flush=True)
 
     for m in models:
         show(check_image(m, 'rgb', args.size, args.subpixels, args.out))
         show(check_image(m, 'bands', args.size, args.bands_subpixels, args.out))
         show(check_image(m, 'spectral', args.spectral_size, args.spectral_subpixels,
                          args.out))
+        if not args.no_jit:
+            show(check_image(m, 'rgb', args.size, args.subpixels, args.out, jit=True))
+            show(check_image(m, 'bands', args.size, args.bands_subpixels, args.out, jit=True))
+            show(check_image(m, 'spectral', args.spectral_size, args.spectral_subpixels,
+                             args.out, jit=True))
         if not args.no_slices:
             show(check_slices(m, args.out))
     if 'cd' in models:
