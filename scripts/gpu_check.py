@@ -3,6 +3,8 @@
 
     .venv/bin/python scripts/gpu_check.py [--variant cuda_ad_rgb] [--quick]
 
+(--variant llvm_ad_rgb runs the same checks on the CPU: a dry run of the script.)
+
 Runs, in a cuda_ad_* variant with Dr.Jit's default flags (symbolic loops and
 calls), the checks the issue asks of the JIT path (docs/jit.md):
   accuracy  the plugin's eval / cos against the core through ctypes
@@ -45,6 +47,9 @@ def cuda_available(variant):
     import mitsuba as mi
     if variant not in mi.variants():
         return False, 'this Mitsuba build has no variant %s' % variant
+    if variant.startswith('llvm'):  # a dry run of the checks on the CPU
+        mi.set_variant(variant)
+        return True, ''
     try:
         import drjit as dr
         if not dr.has_backend(dr.JitBackend.CUDA):
