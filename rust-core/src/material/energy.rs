@@ -38,6 +38,8 @@
 
 use super::Brdf;
 use crate::models::EnergyHint;
+use crate::optics::program::Vec3;
+use crate::program::{lookup, Builder, Value};
 use crate::sampling::warps::radical_inverse;
 use crate::sampling::SplitMix64;
 use glam::DVec3;
@@ -319,6 +321,92 @@ impl EnergyTable {
 
     pub fn memory_bytes(&self) -> usize {
         self.m.len() * 8
+    }
+}
+
+/// The table as program operations (crate::program, docs/jit.md).
+impl EnergyTable {
+    /// Whether one factor serves every wavelength.
+    pub fn colour_neutral(&self) -> bool {
+        self.nodes == 1
+    }
+
+    /// `pair(wi, wo).at(lambda)` for unit directions above the horizon;
+    /// `lambda_nm` None only for colour-neutral tables (else None).
+    pub fn pair_program<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        if lambda_nm.is_none() && self.nodes > 1 {
+            return None;
+        }
+        let table = b.table(self.m.iter().map(|&v| v as f32).collect());
+        let k = self.nodes;
+        // The node pair and weight (as PairEnergy::at).
+        let (q0, fq) = match lambda_nm {
+            Some(lambda) if k > 1 => {
+                let x = ((lambda - self.lambda_lo) * (1.0 / self.lambda_step))
+                    .clamp(0.0, (k - 1) as f64);
+                let q = x.floor().min((k - 2) as f64);
+                (q, Some(x - q))
+            }
+            _ => (b.c(0.0), None),
+        };
+        // m at a direction, at nodes q0 and q0 + 1 (as `factors`).
+        let factor = |d: Vec3<'a>| -> (Value<'a>, Value<'a>) {
+            let r = self.radial as f64;
+            let x = d[2].clamp(0.0, 1.0).sqrt() * r - 0.5;
+            let i0 = x.max(0.0).floor().min(r - 1.0);
+            let i1 = (i0 + 1.0).min(r - 1.0);
+            let fi = (x - i0).clamp(0.0, 1.0);
+            let n = self.azimuthal as f64;
+            let (j0, j1, fj) = if self.azimuthal == 1 {
+                (b.c(0.0), b.c(0.0), b.c(0.0))
+            } else {
+                let y = (d[1].atan2(d[0]) + PI) * (n / (2.0 * PI)) - 0.5;
+                let y = y.lt(0.0).select(y + n, y);
+                let j0 = y.floor().clamp(0.0, n - 1.0);
+                let j1 = (j0 + 1.0).ge(n).select(0.0, j0 + 1.0);
+                (j0, j1, (y - j0).clamp(0.0, 1.0))
+            };
+            let corners = [
+                (i0, j0, (1.0 - fi) * (1.0 - fj)),
+                (i0, j1, (1.0 - fi) * fj),
+                (i1, j0, fi * (1.0 - fj)),
+                (i1, j1, fi * fj),
+            ];
+            let at = |q: Value<'a>| {
+                lookup::sum(
+                    b,
+                    corners
+                        .iter()
+                        .map(|&(i, j, w)| w * b.gather(table, (i * n + j) * k as f64 + q)),
+                )
+            };
+            let lo = at(q0);
+            let hi = if fq.is_some() { at(q0 + 1.0) } else { lo };
+            (lo, hi)
+        };
+        let taper = |cos: Value<'a>| {
+            let x = cos * (1.0 / self.taper_cos);
+            let inside = x * x * (3.0 - x * 2.0);
+            cos.ge(self.taper_cos)
+                .select(1.0, cos.gt(0.0).select(inside, 0.0))
+        };
+        let (a0, a1) = factor(wi);
+        let (b0, b1) = factor(wo);
+        let taper = taper(wi[2]) * taper(wo[2]);
+        let p0 = a0 * b0 * taper;
+        Some(match fq {
+            Some(f) => {
+                let p1 = a1 * b1 * taper;
+                p0 + (p1 - p0) * f
+            }
+            None => p0,
+        })
     }
 }
 

@@ -70,11 +70,12 @@ fn band<'a>(lambda: Value<'a>) -> (Value<'a>, Mask<'a>) {
 
 impl Brdf {
     /// The program of `kind`; None where the material has none: a model
-    /// without that program, or "energy": "conserving" (not exported yet).
+    /// without that program, or the RGB kinds of "energy": "conserving"
+    /// with a table per wavelength (gratings: the factor would have to join
+    /// each order's integration over wavelength, which the models' RGB
+    /// programs do not take yet).
     pub fn program(&self, kind: ProgramKind) -> Option<Program> {
-        if self.energy.is_some() {
-            return None;
-        }
+        let energy = self.energy_table();
         let model = self.surface.programs();
         let shading = self.shading();
         let b = Builder::new();
@@ -84,7 +85,14 @@ impl Brdf {
                 let pair = PairProgram::new(&b, wi, wo);
                 if kind == ProgramKind::EvalRgb {
                     let rgb = model.reflectance_rgb_program(&b, &shading, &pair)?;
-                    let rgb = gamut_map_program(rgb.map(|c| c * pair.geometric_factor));
+                    // A colour-neutral factor commutes with the gamut map.
+                    let scale = match energy {
+                        Some(e) => {
+                            pair.geometric_factor * e.pair_program(&b, pair.wi, pair.wo, None)?
+                        }
+                        None => pair.geometric_factor,
+                    };
+                    let rgb = gamut_map_program(rgb.map(|c| c * scale));
                     rgb.map(|c| pair.valid.select(c.finite_non_negative(), 0.0))
                         .to_vec()
                 } else {
@@ -92,7 +100,11 @@ impl Brdf {
                     let k = (2000.0 * PI) / lambda;
                     let kernel = model.kernel_program(&b, &pair, k)?;
                     let f2 = self.fresnel.program(&b, pair.cos_half, lambda);
-                    let f = (f2 * pair.geometric_factor * kernel).finite_non_negative();
+                    let mut f = f2 * pair.geometric_factor * kernel;
+                    if let Some(e) = energy {
+                        f = f * e.pair_program(&b, pair.wi, pair.wo, Some(lambda))?;
+                    }
+                    let f = f.finite_non_negative();
                     vec![(pair.valid & in_band).select(f, 0.0)]
                 }
             }
@@ -134,12 +146,20 @@ impl Brdf {
             }
             ProgramKind::CoherentRgb | ProgramKind::CoherentSpectral => {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
+                let mirror = [-wi[0], -wi[1], wi[2]];
                 let (rgb, lambda, ok) = if kind == ProgramKind::CoherentRgb {
-                    let rgb = model.coherent_rgb_program(&b, &shading, wi[2])?;
+                    let mut rgb = model.coherent_rgb_program(&b, &shading, wi[2])?;
+                    if let Some(e) = energy {
+                        let m = e.pair_program(&b, wi, mirror, None)?;
+                        rgb = rgb.map(|c| c * m);
+                    }
                     (gamut_map_program(rgb).to_vec(), None, ok_i)
                 } else {
                     let (lambda, in_band) = band(b.input());
-                    let r = model.coherent_spectral_program(&b, &shading, wi[2], lambda)?;
+                    let mut r = model.coherent_spectral_program(&b, &shading, wi[2], lambda)?;
+                    if let Some(e) = energy {
+                        r = r * e.pair_program(&b, wi, mirror, Some(lambda))?;
+                    }
                     (vec![r], Some(lambda), ok_i & in_band)
                 };
                 let p_c = model.coherent_probability_program(&b, &shading, wi, lambda)?;
