@@ -9,7 +9,15 @@
 //! baseline adds the coherent reflectance deterministically (it can never
 //! hit the delta lobe), which favours the baseline. RGB mode scores the sum
 //! of the three channels.
+//!
+//! The JIT columns: the material's sampling programs (what the plugin runs
+//! with Dr.Jit in the llvm_ad / cuda_ad variants, docs/jit.md), executed
+//! here in f32 on the CPU: sample, pdf and coherent programs, the same
+//! estimator with the same native f. "JIT / core" is Var(JIT) / Var(core)
+//! (goal: at most 2).
 use glam::DVec3;
+use stam::material::program::ProgramKind;
+use stam::program::Program;
 use stam::Brdf;
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -21,6 +29,61 @@ fn mean_var(xs: &[f64]) -> (f64, f64) {
     let mean = xs.iter().sum::<f64>() / n;
     let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
     (mean, var)
+}
+
+/// The material's sampling programs for one mode.
+struct JitSampler {
+    sample: Program,
+    pdf: Program,
+    coherent: Program,
+}
+
+impl JitSampler {
+    fn new(brdf: &Brdf, spectral: bool) -> Option<JitSampler> {
+        let (s, p, c) = if spectral {
+            (
+                ProgramKind::SampleSpectral,
+                ProgramKind::PdfSpectral,
+                ProgramKind::CoherentSpectral,
+            )
+        } else {
+            (
+                ProgramKind::SampleRgb,
+                ProgramKind::PdfRgb,
+                ProgramKind::CoherentRgb,
+            )
+        };
+        Some(JitSampler {
+            sample: brdf.program(s)?,
+            pdf: brdf.program(p)?,
+            coherent: brdf.program(c)?,
+        })
+    }
+
+    /// (wo, pdf, coherent) of one sample, run in f32 as a renderer does.
+    fn draw(&self, wi: DVec3, lambda: Option<f64>, u: [f64; 3]) -> (DVec3, f64, bool) {
+        let mut x: Vec<f32> = [wi.x, wi.y, wi.z, u[0], u[1], u[2]]
+            .iter()
+            .map(|&v| v as f32)
+            .collect();
+        x.extend(lambda.map(|l| l as f32));
+        let o = self.sample.run(&x);
+        let wo = DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64);
+        if o[3] > 0.5 {
+            let mut c: Vec<f32> = vec![wi.x as f32, wi.y as f32, wi.z as f32];
+            c.extend(lambda.map(|l| l as f32));
+            return (wo, *self.coherent.run(&c).last().unwrap() as f64, true);
+        }
+        if !(wo.z > 0.0) {
+            return (wo, 0.0, false);
+        }
+        let mut p: Vec<f32> = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z]
+            .iter()
+            .map(|&v| v as f32)
+            .collect();
+        p.extend(lambda.map(|l| l as f32));
+        (wo, self.pdf.run(&p)[0] as f64, false)
+    }
 }
 
 fn main() {
@@ -64,9 +127,9 @@ fn main() {
     ];
     println!("{n} samples per estimate; ratio = Var(cosine) / Var(importance)");
     println!(
-        "| material | incidence | mode | albedo (IS) | albedo (cos) | Var IS | Var cos | ratio | ns/sample | ns/eval |"
+        "| material | incidence | mode | albedo (IS) | albedo (cos) | Var IS | Var cos | ratio | ns/sample | ns/eval | albedo (JIT) | Var JIT | ratio cos/JIT | JIT / core |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, json) in materials {
         if !name.contains(filter.as_str()) {
             continue;
@@ -123,9 +186,30 @@ fn main() {
                 }
                 let (m_is, v_is) = mean_var(&is);
                 let (m_cos, v_cos) = mean_var(&cos);
+                let jit = JitSampler::new(&brdf, mode.is_some()).map(|j| {
+                    let jit: Vec<f64> = (0..n)
+                        .map(|_| {
+                            let (wo, pdf, coh) = j.draw(wi, mode, rng.three());
+                            if !(pdf > 0.0) {
+                                0.0
+                            } else if coh {
+                                coherent / pdf
+                            } else {
+                                f(wo) * wo.z / pdf
+                            }
+                        })
+                        .collect();
+                    mean_var(&jit)
+                });
+                let jit_cols = match jit {
+                    Some((m, v)) => {
+                        format!("{m:.4} | {v:.3e} | {:.1} | {:.2}", v_cos / v, v / v_is)
+                    }
+                    None => "- | - | - | -".into(),
+                };
                 let mode_name = if mode.is_some() { "550 nm" } else { "RGB" };
                 println!(
-                    "| {name} | {inc_name} | {mode_name} | {m_is:.4} | {m_cos:.4} | {v_is:.3e} | {v_cos:.3e} | {:.1} | {ns_sample:.0} | {ns_eval:.0} |",
+                    "| {name} | {inc_name} | {mode_name} | {m_is:.4} | {m_cos:.4} | {v_is:.3e} | {v_cos:.3e} | {:.1} | {ns_sample:.0} | {ns_eval:.0} | {jit_cols} |",
                     v_cos / v_is
                 );
             }
