@@ -15,6 +15,9 @@
 //! here in f32 on the CPU: sample, pdf and coherent programs, the same
 //! estimator with the same native f. "JIT / core" is Var(JIT) / Var(core)
 //! (goal: at most 2).
+// `!(x > 0.0)` rejects NaN too, as in the core.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use glam::DVec3;
 use stam::material::program::ProgramKind;
 use stam::program::Program;
