@@ -6,7 +6,10 @@
 //! accepted. Invariants: no panic or crash (the ABI catches panics and would
 //! report "internal error"), every refusal has a non-empty message, every
 //! output is finite and >= 0, sampled directions are unit vectors when their
-//! pdf is > 0.
+//! pdf is > 0. The material's programs (stam_brdf_export_program) are
+//! decoded with stam::program::decode and run on the same floats with the
+//! core's f32 executor (the contract of tools/stress/src/programs.rs, which
+//! the proptest twin applies in full).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -85,6 +88,59 @@ fuzz_target!(|data: &[u8]| {
                 "sample_vertex differs from the combined call"
             );
         }
+        // Programs: sized with NULL, nothing written into a small buffer,
+        // format 2 with the kind's inputs and outputs (stam.h), decodable;
+        // run on the lanes (a sample's uniforms also folded into [0, 1)):
+        // eval, pdf and coherent outputs finite and >= 0 (a probability
+        // <= 1); a sample's flag 0 or 1 and, from uniforms in [0, 1], a
+        // finite direction, unit where it is above the horizon.
+        const IO: [(u32, usize); 8] = [(6, 3), (7, 1), (6, 1), (7, 1), (6, 4), (7, 4), (3, 4), (4, 2)];
+        for kind in 0..8u32 {
+            let len = stam_brdf_export_program(p, kind, std::ptr::null_mut(), 0);
+            let mut small = [0.0f32; 4];
+            assert!(stam_brdf_export_program(p, kind, small.as_mut_ptr(), small.len()) == len);
+            assert!(len == 0 || len > small.len() && small == [0.0; 4], "program written into a small buffer");
+            if len == 0 {
+                continue;
+            }
+            let mut array = vec![0.0f32; len];
+            assert!(stam_brdf_export_program(p, kind, array.as_mut_ptr(), len) == len);
+            assert!(array[0] == stam::program::FORMAT as f32 && array[5] == len as f32, "program header");
+            let prog = stam::program::decode(&array).expect("an exported program decodes");
+            assert!((prog.n_inputs, prog.outputs.len()) == IO[kind as usize], "program inputs / outputs");
+            let sampling = kind / 2 == 2;
+            for i in 0..n {
+                for fold in [false, true].into_iter().take(if sampling { 2 } else { 1 }) {
+                    let fold_u = |x: f32| if !fold { x } else if x.is_finite() { x.abs().fract() } else { 0.5 };
+                    let u: Vec<f32> = rnd[3 * i..3 * i + 3].iter().map(|&x| fold_u(x)).collect();
+                    let mut inputs = wi[3 * i..3 * i + 3].to_vec();
+                    match kind / 2 {
+                        0 | 1 => inputs.extend_from_slice(&wo[3 * i..3 * i + 3]),
+                        2 => inputs.extend_from_slice(&u),
+                        _ => {}
+                    }
+                    if kind % 2 == 1 {
+                        inputs.push(lam[i]);
+                    }
+                    let out = prog.run::<f32>(&inputs);
+                    if sampling {
+                        assert!(out[3] == 0.0 || out[3] == 1.0, "a sample's coherent flag {}", out[3]);
+                        if u.iter().all(|x| (0.0..=1.0).contains(x)) {
+                            assert!(out[..3].iter().all(|x| x.is_finite()), "sampled direction not finite");
+                            if out[2] > 0.0 {
+                                let l: f64 = out[..3].iter().map(|x| (*x as f64).powi(2)).sum::<f64>().sqrt();
+                                assert!((l - 1.0).abs() <= 1e-4, "sampled direction not unit");
+                            }
+                        }
+                    } else {
+                        assert!(ok(&out), "program {kind} output not finite and >= 0: {out:?}");
+                        assert!(kind < 6 || out[out.len() - 1] <= 1.0, "coherent probability > 1");
+                    }
+                }
+            }
+        }
+        assert!(stam_brdf_export_program(p, 8, std::ptr::null_mut(), 0) == 0);
+        assert!(stam_brdf_export_program(p, u32::MAX, std::ptr::null_mut(), 0) == 0);
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
         let n = stam_brdf_export_table(p, std::ptr::null_mut(), 0);

@@ -20,10 +20,23 @@ results come back as float64 arrays holding those float32 values.
 
 Methods follow the header's functions one to one (stam_brdf_<method>); see
 stam.h for the exact contract of each.
+
+Programs (stam_brdf_export_program): what a renderer that traces its code
+(Dr.Jit) executes; Brdf.export_program(kind) hands one out as a float32 array
+and run_program(array, inputs) executes it with numpy, in float32, with the
+operations' exact semantics (the core's CPU executor,
+rust-core/src/program/interpret.rs), so that scripts and tests can run the
+programs without Mitsuba:
+
+    with core.Brdf({'surface': 'cd'}) as b:
+        prog = b.export_program(core.PROGRAM_SAMPLE_RGB)    # None if it has none
+        out = core.run_program(prog, np.concatenate([wi, u], axis=-1))  # (..., 4)
 """
 
+import collections
 import ctypes
 import json
+import operator
 import os
 import re
 
@@ -55,6 +68,74 @@ def _header_luminance(path=HEADER):
 # gamut-mapped at constant luminance Y = SRGB_LUMINANCE . rgb).
 SRGB_LUMINANCE = np.array(_header_luminance())
 SRGB_LUMINANCE.setflags(write=False)
+
+
+def _header_program_kinds(path=HEADER):
+    """{NAME: code} of the macros STAM_PROGRAM_<NAME> in stam.h."""
+    with open(path) as f:
+        text = f.read()
+    return {name: int(value) for name, value in
+            re.findall(r'^#define\s+STAM_PROGRAM_([A-Z_]+)\s+(\d+)u?\b', text, re.M)}
+
+
+_KINDS = _header_program_kinds()
+_KIND_NAMES = ('EVAL_RGB', 'EVAL_SPECTRAL', 'PDF_RGB', 'PDF_SPECTRAL', 'SAMPLE_RGB',
+               'SAMPLE_SPECTRAL', 'COHERENT_RGB', 'COHERENT_SPECTRAL', 'KINDS')
+if set(_KINDS) != set(_KIND_NAMES):
+    raise RuntimeError('stam_diffraction.core: %s has the program kinds %s, not %s'
+                       % (HEADER, sorted(_KINDS), sorted(_KIND_NAMES)))
+
+# Kinds of program (STAM_PROGRAM_* of stam.h, read from it). Inputs and outputs
+# of each, in this order (directions in the local frame, lambda in nm, u
+# uniforms in [0, 1)):
+#   EVAL_RGB          wi[3] wo[3]        -> f R, G, B (no cos, no coherent lobe)
+#   EVAL_SPECTRAL     wi[3] wo[3] lambda -> f
+#   PDF_RGB           wi[3] wo[3]        -> glossy density at wo (RGB strategy)
+#   PDF_SPECTRAL      wi[3] wo[3] lambda -> glossy density (lambda's strategy)
+#   SAMPLE_RGB        wi[3] u[3]         -> wo[3], coherent (1 or 0)
+#   SAMPLE_SPECTRAL   wi[3] u[3] lambda  -> wo[3], coherent
+#   COHERENT_RGB      wi[3]              -> coherent R, G, B, its probability
+#   COHERENT_SPECTRAL wi[3] lambda       -> coherent reflectance, probability
+PROGRAM_EVAL_RGB = _KINDS['EVAL_RGB']
+PROGRAM_EVAL_SPECTRAL = _KINDS['EVAL_SPECTRAL']
+PROGRAM_PDF_RGB = _KINDS['PDF_RGB']
+PROGRAM_PDF_SPECTRAL = _KINDS['PDF_SPECTRAL']
+PROGRAM_SAMPLE_RGB = _KINDS['SAMPLE_RGB']
+PROGRAM_SAMPLE_SPECTRAL = _KINDS['SAMPLE_SPECTRAL']
+PROGRAM_COHERENT_RGB = _KINDS['COHERENT_RGB']
+PROGRAM_COHERENT_SPECTRAL = _KINDS['COHERENT_SPECTRAL']
+PROGRAM_KINDS = _KINDS['KINDS']
+# (inputs, outputs) of each kind, indexed by its code (the table above).
+PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
+              PROGRAM_PDF_RGB: (6, 1), PROGRAM_PDF_SPECTRAL: (7, 1),
+              PROGRAM_SAMPLE_RGB: (6, 4), PROGRAM_SAMPLE_SPECTRAL: (7, 4),
+              PROGRAM_COHERENT_RGB: (3, 4), PROGRAM_COHERENT_SPECTRAL: (4, 2)}
+
+# The program array (format 2; rust-core/src/program/encode.rs): a header of
+# PROGRAM_HEADER_LEN values (format, inputs, outputs, instructions, tables,
+# total length, 0, 0), the output registers, (offset, length) per table, four
+# values per instruction (op code, a, b, c; a Const's a is its value), then
+# the tables' values. Integers are stored as floats.
+PROGRAM_FORMAT = 2
+PROGRAM_HEADER_LEN = 8
+# Operation codes, in code order (rust-core/src/program/mod.rs, enum Op).
+PROGRAM_OPS = ('Input', 'Const', 'Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Fma', 'Neg',
+               'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos', 'Atan2', 'Floor', 'Lt', 'Le', 'Gt',
+               'Ge', 'Eq', 'Finite', 'And', 'Or', 'Not', 'Select', 'Gather')
+_OP = {name: code for code, name in enumerate(PROGRAM_OPS)}
+_GIVES_MASK = frozenset(_OP[n] for n in ('Lt', 'Le', 'Gt', 'Ge', 'Eq', 'Finite', 'And', 'Or',
+                                         'Not'))
+_ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const')]
+              + [(_OP[n], 1) for n in ('Neg', 'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos',
+                                       'Floor', 'Finite', 'Not', 'Gather')]
+              + [(_OP[n], 2) for n in ('Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Atan2',
+                                       'Lt', 'Le', 'Gt', 'Ge', 'Eq', 'And', 'Or')]
+              + [(_OP[n], 3) for n in ('Fma', 'Select')])
+
+# A decoded program: n_inputs; outputs (registers); code, a list of
+# (op, a, b, c) with a Const's a its float32 value and a Gather's a its
+# table; tables, float32 arrays.
+Program = collections.namedtuple('Program', 'n_inputs outputs code tables')
 
 _lib = None
 
@@ -92,6 +173,7 @@ def lib():
         'stam_brdf_flags': (ctypes.c_uint32, [vp]),
         'stam_brdf_memory_bytes': (sz, [vp]),
         'stam_brdf_export_table': (sz, [vp, fp, sz]),
+        'stam_brdf_export_program': (sz, [vp, ctypes.c_uint32, fp, sz]),
         'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
         'stam_version': (ctypes.c_char_p, []),
     }
@@ -190,6 +272,23 @@ class Brdf:
         written = int(self._lib.stam_brdf_export_table(self._handle(), _ptr(out), n))
         if written != n:
             raise RuntimeError('stam_diffraction.core: export_table wrote %d of %d' % (written, n))
+        return out
+
+    def export_program(self, kind):
+        """The program of `kind` (PROGRAM_EVAL_RGB .. PROGRAM_COHERENT_SPECTRAL;
+        stam_brdf_export_program) as a float32 array for run_program, or
+        None when the material has none of that kind or the kind is not one."""
+        kind = operator.index(kind)
+        if not 0 <= kind < 2 ** 32:
+            return None
+        n = int(self._lib.stam_brdf_export_program(self._handle(), kind, None, 0))
+        if n == 0:
+            return None
+        out = np.empty(n, dtype=np.float32)
+        written = int(self._lib.stam_brdf_export_program(self._handle(), kind, _ptr(out), n))
+        if written != n:
+            raise RuntimeError('stam_diffraction.core: export_program wrote %d of %d'
+                               % (written, n))
         return out
 
     def warnings(self):
@@ -362,3 +461,201 @@ class Brdf:
                 s_wo.astype(np.float64).reshape(shape + (3,)),
                 s_pdf.astype(np.float64).reshape(shape), s_coh.astype(bool).reshape(shape),
                 s_value.astype(np.float64).reshape(shape + (nc,)))
+
+
+# -- programs -------------------------------------------------------------------
+
+
+def decode_program(array):
+    """The Program of an array of export_program, checked as the core's
+    decode checks it (rust-core/src/program/encode.rs): format, length,
+    sections inside the array, every operand a register defined before its
+    use and of the right kind (float or mask), outputs floats. Raises
+    ValueError otherwise."""
+    v = np.asarray(array)
+    if v.ndim != 1:
+        raise ValueError('stam_diffraction.core: a program is a 1-D array, not %s' % (v.shape,))
+    v = v.astype(np.float32, copy=False)
+
+    def bad(what):
+        return ValueError('stam_diffraction.core: not a program array: %s' % what)
+
+    def integer(x, what):
+        x = float(x)
+        if not (0.0 <= x < 16777216.0 and x == int(x)):
+            raise bad('%s is %r, not an integer below 2^24' % (what, x))
+        return int(x)
+
+    if len(v) < PROGRAM_HEADER_LEN:
+        raise bad('%d values, shorter than the header' % len(v))
+    if integer(v[0], 'the format') != PROGRAM_FORMAT:
+        raise bad('format %g, not %d' % (v[0], PROGRAM_FORMAT))
+    n_inputs, n_out, n_code, n_tab, total = (integer(v[i], 'header value %d' % i)
+                                             for i in range(1, 6))
+    if total != len(v):
+        raise bad('length %d, the header says %d' % (len(v), total))
+    directory = PROGRAM_HEADER_LEN + n_out
+    code_at = directory + 2 * n_tab
+    code_end = code_at + 4 * n_code
+    if code_end > total:
+        raise bad('%d instructions and %d tables do not fit' % (n_code, n_tab))
+    tables = []
+    for t in range(n_tab):
+        off = integer(v[directory + 2 * t], 'table %d offset' % t)
+        length = integer(v[directory + 2 * t + 1], 'table %d length' % t)
+        if off < code_end or off + length > total:
+            raise bad('table %d at %d..%d' % (t, off, off + length))
+        tables.append(v[off:off + length].copy())
+    code, is_mask = [], []
+    for i in range(n_code):
+        w = v[code_at + 4 * i:code_at + 4 * i + 4]
+        op = integer(w[0], 'op code %d' % i)
+        if op >= len(PROGRAM_OPS):
+            raise bad('op code %d at instruction %d' % (op, i))
+        a = np.float32(w[1]) if op == _OP['Const'] else integer(w[1], 'operand a of %d' % i)
+        b, c = integer(w[2], 'operand b of %d' % i), integer(w[3], 'operand c of %d' % i)
+        if op == _OP['Input'] and a >= n_inputs:
+            raise bad('instruction %d reads input %d of %d' % (i, a, n_inputs))
+        if op == _OP['Gather'] and a >= n_tab:
+            raise bad('instruction %d gathers from table %d of %d' % (i, a, n_tab))
+        operands = [b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]]
+        for k, r in enumerate(operands):
+            wants_mask = (op in (_OP['And'], _OP['Or'], _OP['Not'])
+                          or (op == _OP['Select'] and k == 0))
+            if r >= i or is_mask[r] != wants_mask:
+                raise bad('instruction %d (%s) reads register %d' % (i, PROGRAM_OPS[op], r))
+        is_mask.append(op in _GIVES_MASK)
+        code.append((op, a, b, c))
+    outputs = []
+    for k in range(n_out):
+        r = integer(v[PROGRAM_HEADER_LEN + k], 'output %d' % k)
+        if r >= n_code or is_mask[r]:
+            raise bad('output %d is register %d' % (k, r))
+        outputs.append(r)
+    return Program(n_inputs, tuple(outputs), code, tables)
+
+
+def _fma32(a, b, c):
+    """a * b + c rounded once to float32 (f32::mul_add): the product is exact
+    in float64; the float64 sum, made round-to-odd with its exact error
+    (TwoSum), then rounds to float32 as the exact value would."""
+    a, b, c = (np.asarray(x, dtype=np.float64) for x in (a, b, c))
+    p = a * b
+    s = p + c
+    bv = s - p
+    err = (p - (s - bv)) + (c - bv)
+    even = (np.asarray(s).view(np.int64) & 1) == 0
+    fix = (err != 0) & np.isfinite(err) & even
+    s = np.where(fix, np.nextafter(s, np.where(err > 0, np.inf, -np.inf)), s)
+    return s.astype(np.float32)
+
+
+def run_program(program, inputs):
+    """Runs a program (an array of Brdf.export_program, or a decoded
+    Program) on lanes of inputs (..., n_inputs): float32 outputs (...,
+    n_outputs). Every operation as the core's executor
+    (rust-core/src/program/interpret.rs) does it, in float32: +, -, *, /,
+    sqrt, floor correctly rounded; min/max return the other operand where
+    one is NaN (the sign of a zero they return is unspecified, as there);
+    Fma rounds once; comparisons give masks (1 or 0) that And/Or/Not/Select
+    read as > 0; Gather reads table a at index b clamped into [0, len - 1]
+    (NaN to 0), then truncated (an empty table gives 0). exp, log, sin, cos
+    and atan2 are taken in float64 and rounded to float32: correctly
+    rounded but for rare ties, as the C library's float32 functions the
+    core calls are to within an ulp."""
+    p = program if isinstance(program, Program) else decode_program(program)
+    x = np.asarray(inputs, dtype=np.float32)
+    if x.ndim == 0 or x.shape[-1] != p.n_inputs:
+        raise ValueError('stam_diffraction.core: the program takes inputs (..., %d), not %s'
+                         % (p.n_inputs, x.shape))
+    shape = x.shape[:-1]
+    x = x.reshape(-1, p.n_inputs)
+    # Registers are dropped after their last reader (memory: the live
+    # registers times the lanes, not the program's length).
+    reads = [[b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]] for op, a, b, c in p.code]
+    last = {}
+    for i, rs in enumerate(reads):
+        for r in rs:
+            last[r] = i
+    for r in p.outputs:
+        last[r] = len(p.code)
+    dead_after = collections.defaultdict(list)
+    for r, i in last.items():
+        dead_after[i].append(r)
+    regs = []
+    f32 = np.float32
+
+    def f64(v):
+        return np.asarray(v, dtype=np.float64)
+
+    with np.errstate(all='ignore'):
+        for op, a, b, c in p.code:
+            name = PROGRAM_OPS[op]
+            r = regs
+            if name == 'Input':
+                v = x[:, a]
+            elif name == 'Const':
+                v = np.asarray(a, dtype=f32)
+            elif name == 'Add':
+                v = r[a] + r[b]
+            elif name == 'Sub':
+                v = r[a] - r[b]
+            elif name == 'Mul':
+                v = r[a] * r[b]
+            elif name == 'Div':
+                v = r[a] / r[b]
+            elif name == 'Min':
+                v = np.fmin(r[a], r[b])
+            elif name == 'Max':
+                v = np.fmax(r[a], r[b])
+            elif name == 'Fma':
+                v = _fma32(r[a], r[b], r[c])
+            elif name == 'Neg':
+                v = -r[a]
+            elif name == 'Abs':
+                v = np.abs(r[a])
+            elif name == 'Sqrt':
+                v = np.sqrt(r[a])
+            elif name == 'Exp':
+                v = np.exp(f64(r[a]))
+            elif name == 'Log':
+                v = np.log(f64(r[a]))
+            elif name == 'Sin':
+                v = np.sin(f64(r[a]))
+            elif name == 'Cos':
+                v = np.cos(f64(r[a]))
+            elif name == 'Atan2':
+                v = np.arctan2(f64(r[a]), f64(r[b]))
+            elif name == 'Floor':
+                v = np.floor(r[a])
+            elif name == 'Lt':
+                v = r[a] < r[b]
+            elif name == 'Le':
+                v = r[a] <= r[b]
+            elif name == 'Gt':
+                v = r[a] > r[b]
+            elif name == 'Ge':
+                v = r[a] >= r[b]
+            elif name == 'Eq':
+                v = r[a] == r[b]
+            elif name == 'Finite':
+                v = np.isfinite(r[a])
+            elif name == 'And':
+                v = r[a] & r[b]
+            elif name == 'Or':
+                v = r[a] | r[b]
+            elif name == 'Not':
+                v = ~r[a]
+            elif name == 'Select':
+                v = np.where(r[a], r[b], r[c])
+            else:  # Gather
+                t = p.tables[a]
+                i = np.asarray(r[b], dtype=np.float64)
+                i = np.where(np.isnan(i), 0.0, np.clip(i, 0.0, max(len(t), 1) - 1))
+                v = t[i.astype(np.int64)] if len(t) else np.zeros(i.shape, f32)
+            regs.append(np.asarray(v, dtype=bool if op in _GIVES_MASK else f32))
+            for r in dead_after.get(len(regs) - 1, ()):
+                regs[r] = None
+    out = np.stack([np.broadcast_to(regs[k], (len(x),)) for k in p.outputs], axis=-1) \
+        if p.outputs else np.zeros((len(x), 0), f32)
+    return out.astype(f32).reshape(shape + (len(p.outputs),))

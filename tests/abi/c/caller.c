@@ -107,6 +107,88 @@ static int check_coherent_probability(const StamBrdf *b, const float *wi, const 
     return 0;
 }
 
+/* Checks of stam_brdf_export_program (stam.h; layout: format 2): every
+ * kind sized with out = NULL, nothing written into a buffer that is too
+ * small (4 floats, or one short), the whole array written into one of the
+ * returned size and nothing past it; the header: format 2, the kind's
+ * numbers of inputs and outputs, the total length, sections that fit in
+ * the array, output registers and table offsets inside it. The sampling
+ * kinds, their densities and the coherent kinds exist for every material
+ * (the material's cosine-sampling fallback) unless "energy": "conserving"
+ * (no programs yet); a kind out of range and the NULL material give 0. */
+static int check_export_program(const StamBrdf *b, const char *params_json, char *report,
+                                size_t report_len) {
+    /* Inputs and outputs of each kind, in the order of STAM_PROGRAM_*. */
+    static const size_t io[STAM_PROGRAM_KINDS][2] = {{6, 3}, {7, 1}, {6, 1}, {7, 1},
+                                                     {6, 4}, {7, 4}, {3, 4}, {4, 2}};
+    const int conserving = strstr(params_json, "conserving") != NULL;
+    size_t exported = 0;
+    CHECK(42, STAM_PROGRAM_EVAL_RGB == 0u && STAM_PROGRAM_COHERENT_SPECTRAL == 7u &&
+                  STAM_PROGRAM_KINDS == 8u,
+          "program kind codes");
+    for (uint32_t kind = 0; kind < STAM_PROGRAM_KINDS; ++kind) {
+        const size_t n = stam_brdf_export_program(b, kind, NULL, 0);
+        CHECK(42, stam_brdf_export_program(NULL, kind, NULL, 0) == 0, "program %u of NULL", kind);
+        CHECK(42, stam_brdf_export_program(b, kind, NULL, 1000000) == n,
+              "program %u: out = NULL with a capacity gave another size", kind);
+        if (kind >= STAM_PROGRAM_PDF_RGB && !conserving)
+            CHECK(42, n > 0, "no program of kind %u (sampling, pdf and coherent kinds exist "
+                             "for every material)", kind);
+        if (conserving) CHECK(42, n == 0, "a program of kind %u for energy: conserving", kind);
+        if (n == 0) continue;
+        ++exported;
+        CHECK(43, n >= 8 + 4, "program %u: %zu floats, less than a header and one instruction",
+              kind, n);
+        float small[4] = {-1.0f, -1.0f, -1.0f, -1.0f};
+        CHECK(43, stam_brdf_export_program(b, kind, small, 4) == n && small[0] == -1.0f &&
+                      small[3] == -1.0f,
+              "program %u written into a buffer of 4 floats", kind);
+        float *prog = malloc((n + 1) * sizeof(float));
+        CHECK(43, prog != NULL, "out of memory");
+        for (size_t i = 0; i <= n; ++i) prog[i] = -1.0f;
+        const int short_ok = stam_brdf_export_program(b, kind, prog, n - 1) == n &&
+                             prog[0] == -1.0f && prog[n - 2] == -1.0f;
+        const int sized_ok = stam_brdf_export_program(b, kind, prog, n + 1) == n &&
+                             prog[n] == -1.0f;
+        /* Header: format, inputs, outputs, instructions, tables, total
+         * (counts read as integers only once they are known to lie in
+         * [0, n]). */
+        const float *h = prog;
+        int layout_ok = sized_ok && h[0] == 2.0f && h[1] == (float)io[kind][0] &&
+                        h[2] == (float)io[kind][1] && h[5] == (float)n;
+        for (int j = 2; layout_ok && j < 5; ++j)
+            layout_ok = h[j] >= 0.0f && h[j] <= (float)n && h[j] == floorf(h[j]);
+        const size_t n_out = layout_ok ? (size_t)h[2] : 0, n_code = layout_ok ? (size_t)h[3] : 0,
+                     n_tab = layout_ok ? (size_t)h[4] : 0;
+        const size_t code_at = 8 + n_out + 2 * n_tab;
+        layout_ok = layout_ok && n_code > 0 && code_at + 4 * n_code <= n;
+        for (size_t k = 0; layout_ok && k < n_out; ++k)
+            layout_ok = h[8 + k] >= 0.0f && h[8 + k] < (float)n_code;
+        for (size_t t = 0; layout_ok && t < n_tab; ++t) {
+            const float off = h[8 + n_out + 2 * t], len = h[8 + n_out + 2 * t + 1];
+            layout_ok = off >= (float)(code_at + 4 * n_code) && off <= (float)n && len >= 0.0f &&
+                        len <= (float)n && (size_t)off + (size_t)len <= n;
+        }
+        const float head[6] = {h[0], h[1], h[2], h[3], h[4], h[5]};
+        free(prog);
+        CHECK(44, short_ok, "program %u written into a buffer one float short", kind);
+        CHECK(44, sized_ok, "program %u: not %zu floats, or written past them", kind, n);
+        CHECK(45, layout_ok,
+              "program %u header: format %g, inputs %g, outputs %g, instructions %g, tables %g, "
+              "length %g of %zu",
+              kind, head[0], head[1], head[2], head[3], head[4], head[5], n);
+    }
+    CHECK(46, conserving || exported >= 6, "%zu program kinds exported", exported);
+    const uint32_t bad_kinds[3] = {STAM_PROGRAM_KINDS, 1000u, 0xFFFFFFFFu};
+    for (int i = 0; i < 3; ++i) {
+        float small[4] = {-1.0f, -1.0f, -1.0f, -1.0f};
+        CHECK(47, stam_brdf_export_program(b, bad_kinds[i], small, 4) == 0 &&
+                      stam_brdf_export_program(b, bad_kinds[i], NULL, 0) == 0 && small[0] == -1.0f,
+              "a program for the kind %u", bad_kinds[i]);
+    }
+    return 0;
+}
+
 /* stam_brdf_coherent_probability of the material params_json at n lanes,
  * for the Rust side to compare with Brdf::coherent_probability. Returns 0,
  * or -1 when the material is refused. */
@@ -224,6 +306,14 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
                       table[3] == (float)n_export,
               "export header");
         free(table);
+    }
+
+    {
+        int code = check_export_program(b, params_json, report, report_len);
+        if (code != 0) {
+            stam_brdf_free(b);
+            return code;
+        }
     }
 
     /* Plausibility warnings: a unit mistake named, none for the paper's

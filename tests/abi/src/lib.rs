@@ -188,6 +188,10 @@ mod tests {
             ffi::stam_brdf_export_table as unsafe extern "C" fn(_, _, _) -> _,
         );
         same_signature(
+            h::stam_brdf_export_program as unsafe extern "C" fn(_, _, _, _) -> _,
+            ffi::stam_brdf_export_program as unsafe extern "C" fn(_, _, _, _) -> _,
+        );
+        same_signature(
             h::stam_brdf_warnings as unsafe extern "C" fn(_) -> _,
             ffi::stam_brdf_warnings as unsafe extern "C" fn(_) -> _,
         );
@@ -201,6 +205,32 @@ mod tests {
             h::STAM_FLAG_SPECTRALLY_VARYING,
             stam::material::FLAG_SPECTRALLY_VARYING
         );
+    }
+
+    /// The program kinds of the header (STAM_PROGRAM_*) are the core's
+    /// `ProgramKind` codes, in the same order, and STAM_PROGRAM_KINDS is
+    /// their number: every code below it is a kind, none at or above it.
+    #[test]
+    fn header_program_kinds_match_rust() {
+        use c_header as h;
+        use stam::material::program::ProgramKind as K;
+        let header = [
+            (h::STAM_PROGRAM_EVAL_RGB, K::EvalRgb),
+            (h::STAM_PROGRAM_EVAL_SPECTRAL, K::EvalSpectral),
+            (h::STAM_PROGRAM_PDF_RGB, K::PdfRgb),
+            (h::STAM_PROGRAM_PDF_SPECTRAL, K::PdfSpectral),
+            (h::STAM_PROGRAM_SAMPLE_RGB, K::SampleRgb),
+            (h::STAM_PROGRAM_SAMPLE_SPECTRAL, K::SampleSpectral),
+            (h::STAM_PROGRAM_COHERENT_RGB, K::CoherentRgb),
+            (h::STAM_PROGRAM_COHERENT_SPECTRAL, K::CoherentSpectral),
+        ];
+        for (code, kind) in header {
+            assert_eq!(code, kind as u32, "{kind:?}");
+            assert_eq!(K::from_code(code), Some(kind));
+        }
+        assert_eq!(h::STAM_PROGRAM_KINDS as usize, K::ALL.len());
+        assert_eq!(h::STAM_PROGRAM_KINDS as usize, header.len());
+        assert_eq!(K::from_code(h::STAM_PROGRAM_KINDS), None);
     }
 
     /// The luminance weights the header gives renderers (bindgen turns the

@@ -10,6 +10,9 @@
 //!   `pareto` criterion bench share the list).
 //! - [`gen`]: deterministic random generators (materials, directions,
 //!   wavelengths); no external RNG so that a seed reproduces a run exactly.
+//! - [`programs`]: the material's exported programs (stam.h's
+//!   `stam_brdf_export_program`) run on hostile lanes with the core's CPU
+//!   executor, and their contract (the runner and the fuzz test use it).
 //! - [`materials`]: the project's shared list of test materials
 //!   (tests/materials.json), which the survey and the tests draw from.
 
@@ -20,4 +23,5 @@
 pub mod gen;
 pub mod materials;
 pub mod pareto;
+pub mod programs;
 pub mod run;

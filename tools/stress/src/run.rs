@@ -13,10 +13,16 @@
 //!   RGB): outputs finite and >= 0, samples sane, a sample's pdf and value
 //!   equal to the vertex eval at the returned direction, and the separate
 //!   sample call identical to the combined call's sample;
+//! - the material's programs (stam_brdf_export_program): sized with NULL,
+//!   written whole, the Rust API's own program (`Brdf::program`, encoded)
+//!   bit for bit, the sampling, pdf and coherent kinds present (unless
+//!   "energy": "conserving"), and each run on the batch's lanes with the
+//!   core's f32 executor under the contract of `crate::programs`;
 //! - every refused material has a non-empty message; the version string is
 //!   non-empty UTF-8; the plausibility warnings are UTF-8 and the Rust API's.
 
 use crate::gen::{self, Rng};
+use crate::programs;
 use glam::DVec3;
 use stam::ffi;
 use stam::material::plausibility::warnings_for_json;
@@ -85,6 +91,13 @@ pub struct Report {
     /// stam_brdf_warnings returned NULL, text that is not UTF-8, or text
     /// other than the Rust API's warnings of the same parameters.
     pub bad_warnings: u64,
+    /// Programs exported (materials times kinds).
+    pub programs: u64,
+    /// Lanes the programs were run on (one program, one lane).
+    pub program_runs: u64,
+    /// Program contract violations (crate::programs, the export's sizes,
+    /// the ABI's array against the Rust API's, a missing kind).
+    pub bad_programs: u64,
     pub seconds: f64,
     /// The first violations, for diagnosis.
     pub examples: Vec<String>,
@@ -106,6 +119,7 @@ impl Report {
             + self.bad_coherent_probability
             + self.bad_version
             + self.bad_warnings
+            + self.bad_programs
             + self.refused_without_message
     }
 
@@ -215,6 +229,12 @@ impl Report {
             (
                 "coherent probability outside [0, 1]",
                 self.bad_coherent_probability.to_string(),
+            ),
+            ("programs exported", self.programs.to_string()),
+            ("  lanes run (f32 executor)", self.program_runs.to_string()),
+            (
+                "  program contract violations",
+                self.bad_programs.to_string(),
             ),
             (
                 "construction time (total, s)",
@@ -337,6 +357,19 @@ pub fn run(options: &Options) -> Report {
             rnd64.push(r);
         }
         let lam_r: Vec<f64> = lam32.iter().map(|&l| l as f64).collect();
+        // The same lanes for the programs (their uniforms as the ABI gets
+        // them, hostile ones included).
+        let lanes: Vec<programs::Lane> = (0..n)
+            .map(|i| {
+                let at = |v: &[f32]| [v[3 * i], v[3 * i + 1], v[3 * i + 2]];
+                programs::Lane {
+                    wi: at(&wi32),
+                    wo: at(&wo32),
+                    u: at(&rnd32),
+                    lambda: lam32[i],
+                }
+            })
+            .collect();
         let ctx = |what: &'static str, i: usize| {
             let (wi, wo, l) = (wi_r[i], wo_r[i], lam_r[i]);
             let json = &json;
@@ -695,6 +728,7 @@ pub fn run(options: &Options) -> Report {
                 }
             }
         }
+        check_programs(&mut report, b, brdf, &json, &lanes);
         // The warnings: UTF-8, the Rust API's, one per line.
         let warnings = unsafe { ffi::stam_brdf_warnings(b) };
         let expected: Vec<String> = warnings_for_json(&json)
@@ -716,6 +750,93 @@ pub fn run(options: &Options) -> Report {
     }
     report.seconds = start.elapsed().as_secs_f64();
     report
+}
+
+/// The material's programs through the ABI: each kind sized with NULL,
+/// nothing written into a short buffer, the whole array equal bit for bit
+/// to the Rust API's program encoded, decoded and run on the lanes
+/// (crate::programs). The sampling, pdf and coherent kinds exist for every
+/// material but "energy": "conserving" (which has none yet).
+fn check_programs(
+    report: &mut Report,
+    b: *const ffi::StamBrdf,
+    brdf: &stam::Brdf,
+    json: &str,
+    lanes: &[programs::Lane],
+) {
+    use stam::material::program::ProgramKind;
+    let conserving = json.contains("\"conserving\"");
+    let mut decoded = Vec::with_capacity(programs::KINDS as usize);
+    let fail = |report: &mut Report, what: String| {
+        report.bad_programs += 1;
+        report.fail(format!("{what} for {json}"));
+    };
+    for kind in 0..programs::KINDS {
+        let name = programs::NAMES[kind as usize];
+        let n = unsafe { ffi::stam_brdf_export_program(b, kind, std::ptr::null_mut(), 0) };
+        let rust = ProgramKind::from_code(kind)
+            .and_then(|k| brdf.program(k))
+            .map(|p| p.encode());
+        let required = kind >= ProgramKind::PdfRgb as u32 && !conserving;
+        if n == 0 {
+            if required || rust.is_some() {
+                fail(
+                    report,
+                    format!(
+                        "stam_brdf_export_program: no {name} program (the Rust API's: {:?} floats)",
+                        rust.as_ref().map(Vec::len)
+                    ),
+                );
+            }
+            decoded.push(None);
+            continue;
+        }
+        report.programs += 1;
+        let mut array = vec![-1.0f32; n + 1];
+        let short = unsafe { ffi::stam_brdf_export_program(b, kind, array.as_mut_ptr(), n - 1) };
+        let short_ok = short == n && array.iter().all(|&x| x == -1.0);
+        let written = unsafe { ffi::stam_brdf_export_program(b, kind, array.as_mut_ptr(), n + 1) };
+        if !short_ok || written != n || array[n] != -1.0 {
+            fail(
+                report,
+                format!("stam_brdf_export_program {name}: {written} of {n} floats written, or written into a short buffer or past n"),
+            );
+        }
+        array.truncate(n);
+        let same = rust.as_ref().is_some_and(|r| {
+            r.len() == n
+                && r.iter()
+                    .zip(&array)
+                    .all(|(x, y)| x.to_bits() == y.to_bits())
+        });
+        if !same {
+            fail(
+                report,
+                format!("stam_brdf_export_program {name}: not the Rust API's program ({n} floats, Rust {:?})", rust.as_ref().map(Vec::len)),
+            );
+        }
+        match programs::decode_checked(kind, &array) {
+            Ok(p) => decoded.push(Some(p)),
+            Err(e) => {
+                fail(report, e);
+                decoded.push(None);
+            }
+        }
+    }
+    // A kind out of range has none.
+    for kind in [programs::KINDS, u32::MAX] {
+        if unsafe { ffi::stam_brdf_export_program(b, kind, std::ptr::null_mut(), 0) } != 0 {
+            fail(
+                report,
+                format!("stam_brdf_export_program: a program of kind {kind}"),
+            );
+        }
+    }
+    let checked = programs::check(&decoded, lanes);
+    report.program_runs += checked.runs;
+    for v in checked.violations {
+        fail(report, v);
+    }
 }
 
 fn check_sample(

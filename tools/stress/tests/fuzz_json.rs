@@ -4,16 +4,20 @@
 //! caught panic surfaces as an "internal error" message and fails here), no
 //! crash; every refusal has a non-empty message that names a parameter key or
 //! the JSON problem; every accepted material survives every ABI entry point
-//! with arbitrary floats (outputs finite and >= 0).
+//! with arbitrary floats (outputs finite and >= 0). The material's programs
+//! (stam_brdf_export_program) are decoded and run on the same floats with
+//! the core's f32 executor, under the contract of `stress::programs`.
 
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use proptest::prelude::*;
 use std::ffi::{c_char, CString};
 use std::sync::atomic::{AtomicU64, Ordering};
+use stress::programs::{self, Lane};
 
 static ACCEPTED: AtomicU64 = AtomicU64::new(0);
 static REFUSED: AtomicU64 = AtomicU64::new(0);
+static PROGRAM_RUNS: AtomicU64 = AtomicU64::new(0);
 
 /// Every key the parameters know (docs/parameters.md).
 const KEYS: [&str; 19] = [
@@ -229,6 +233,56 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
                 ));
             }
         }
+        // The programs: sized with NULL, nothing written into a small
+        // buffer, the whole array decoded (stress::programs::decode_checked)
+        // and run on the lanes: the floats as they come, and again with the
+        // uniforms folded into [0, 1) so that sampling is reached with the
+        // inputs a renderer gives.
+        let lanes: Vec<Lane> = (0..n)
+            .map(|i| Lane {
+                wi: [wi[3 * i], wi[3 * i + 1], wi[3 * i + 2]],
+                wo: [wo[3 * i], wo[3 * i + 1], wo[3 * i + 2]],
+                u: [rnd[3 * i], rnd[3 * i + 1], rnd[3 * i + 2]],
+                lambda: lam[i],
+            })
+            .flat_map(|l| [l, l.with_valid_uniforms()])
+            .collect();
+        let mut decoded = Vec::new();
+        for kind in 0..programs::KINDS {
+            let len = stam_brdf_export_program(p, kind, std::ptr::null_mut(), 0);
+            let mut small = [0.0f32; 4];
+            if stam_brdf_export_program(p, kind, small.as_mut_ptr(), small.len()) != len
+                || (len > 0 && (len <= small.len() || small != [0.0; 4]))
+            {
+                return Err(format!(
+                    "stam_brdf_export_program {kind}: {len} floats, wrote {small:?} into 4"
+                ));
+            }
+            if len == 0 {
+                decoded.push(None);
+                continue;
+            }
+            let mut array = vec![0.0f32; len];
+            let written = stam_brdf_export_program(p, kind, array.as_mut_ptr(), len);
+            if written != len {
+                return Err(format!(
+                    "stam_brdf_export_program {kind}: {written} of {len} floats"
+                ));
+            }
+            decoded.push(Some(programs::decode_checked(kind, &array)?));
+        }
+        for kind in [programs::KINDS, u32::MAX] {
+            if stam_brdf_export_program(p, kind, std::ptr::null_mut(), 0) != 0 {
+                return Err(format!(
+                    "stam_brdf_export_program: a program of kind {kind}"
+                ));
+            }
+        }
+        let checked = programs::check(&decoded, &lanes);
+        PROGRAM_RUNS.fetch_add(checked.runs, Ordering::Relaxed);
+        if let Some(v) = checked.violations.first() {
+            return Err(format!("program: {v}"));
+        }
         let _ = stam_brdf_flags(p);
         let _ = stam_brdf_memory_bytes(p);
         let n = stam_brdf_export_table(p, std::ptr::null_mut(), 0);
@@ -411,9 +465,10 @@ fn run_strategy<S: Strategy<Value = String>>(name: &str, strategy: S, cases: u32
         exercise(&text, &floats).map_err(TestCaseError::fail)
     });
     println!(
-        "{name}: {cases} cases, accepted {}, refused {} (all refusals with a message naming a key or the JSON problem)",
+        "{name}: {cases} cases, accepted {}, refused {} (all refusals with a message naming a key or the JSON problem); program lanes run so far {}",
         ACCEPTED.load(Ordering::Relaxed) - accepted,
-        REFUSED.load(Ordering::Relaxed) - refused
+        REFUSED.load(Ordering::Relaxed) - refused,
+        PROGRAM_RUNS.load(Ordering::Relaxed)
     );
     if let Err(e) = result {
         panic!("{name}: {e}");
@@ -454,6 +509,9 @@ fn fuzz_reaches_accepted_materials() {
         exercise(&m.params, &[0.1, 0.2, 0.9, f32::NAN, 500.0, -0.3, 0.7]).unwrap();
     }
     assert!(ACCEPTED.load(Ordering::Relaxed) >= accepted_before + 3);
+    // ... and the programs were run: every material has at least its
+    // sampling, pdf and coherent kinds (6 kinds, 8 lanes, 3 materials).
+    assert!(PROGRAM_RUNS.load(Ordering::Relaxed) >= 6 * 8 * 3);
     println!(
         "fuzz counts so far in this process: accepted {}, refused {}",
         ACCEPTED.load(Ordering::Relaxed),

@@ -29,6 +29,14 @@ fn stress_1e5_evaluations_clean() {
     );
     assert!(report.compared > 1000, "compared {}", report.compared);
     assert!(report.samples > report.sample_failures + 1000);
+    // The programs were exported and run (sampling, pdf and coherent kinds
+    // at least, for every material but the energy-conserving ones).
+    assert!(report.programs >= 6, "programs {}", report.programs);
+    assert!(
+        report.program_runs >= report.programs * options.batch as u64,
+        "program lanes run {}",
+        report.program_runs
+    );
     assert_eq!(
         report.failures(),
         0,
