@@ -453,9 +453,19 @@ def test_export_program_round_trip(entry):
             b.export_program(1.5)
 
 
-def test_energy_conserving_materials_have_no_programs():
-    with stam_core.Brdf(dict(GAUSSIAN, energy='conserving')) as b:
-        assert all(b.export_program(k) is None for k in range(stam_core.PROGRAM_KINDS))
+def test_energy_conserving_materials_export_programs():
+    """The energy table joins the programs (EnergyTable::pair_program): the
+    sampling, pdf and coherent kinds exist as for any material, except that a
+    grating's table per wavelength has no RGB eval or coherent program (its
+    factor would have to join each order's integration over wavelength)."""
+    F = stam_core
+    with F.Brdf(dict(GAUSSIAN, energy='conserving')) as b:
+        for k in range(F.PROGRAM_PDF_RGB, F.PROGRAM_KINDS):
+            assert b.export_program(k) is not None, k
+    with F.Brdf(dict(GRATING, energy='conserving')) as b:
+        for k in range(F.PROGRAM_PDF_RGB, F.PROGRAM_KINDS):
+            assert (b.export_program(k) is None) == (k == F.PROGRAM_COHERENT_RGB), k
+        assert b.export_program(F.PROGRAM_EVAL_RGB) is None
 
 
 def test_run_program_operations():

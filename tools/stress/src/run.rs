@@ -15,8 +15,9 @@
 //!   sample call identical to the combined call's sample;
 //! - the material's programs (stam_brdf_export_program): sized with NULL,
 //!   written whole, the Rust API's own program (`Brdf::program`, encoded)
-//!   bit for bit, the sampling, pdf and coherent kinds present (unless
-//!   "energy": "conserving"), and each run on the batch's lanes with the
+//!   bit for bit, the sampling and pdf kinds present (and the coherent
+//!   ones, except for "energy": "conserving" gratings in RGB), and each
+//!   run on the batch's lanes with the
 //!   core's f32 executor under the contract of `crate::programs`;
 //! - every refused material has a non-empty message; the version string is
 //!   non-empty UTF-8; the plausibility warnings are UTF-8 and the Rust API's.
@@ -755,8 +756,10 @@ pub fn run(options: &Options) -> Report {
 /// The material's programs through the ABI: each kind sized with NULL,
 /// nothing written into a short buffer, the whole array equal bit for bit
 /// to the Rust API's program encoded, decoded and run on the lanes
-/// (crate::programs). The sampling, pdf and coherent kinds exist for every
-/// material but "energy": "conserving" (which has none yet).
+/// (crate::programs). The sampling and pdf kinds exist for every material,
+/// the coherent kinds too except where "energy": "conserving" keeps a
+/// table per wavelength (gratings), whose RGB kinds the core does not
+/// export (material/program.rs).
 fn check_programs(
     report: &mut Report,
     b: *const ffi::StamBrdf,
@@ -765,7 +768,6 @@ fn check_programs(
     lanes: &[programs::Lane],
 ) {
     use stam::material::program::ProgramKind;
-    let conserving = json.contains("\"conserving\"");
     let mut decoded = Vec::with_capacity(programs::KINDS as usize);
     let fail = |report: &mut Report, what: String| {
         report.bad_programs += 1;
@@ -777,7 +779,10 @@ fn check_programs(
         let rust = ProgramKind::from_code(kind)
             .and_then(|k| brdf.program(k))
             .map(|p| p.encode());
-        let required = kind >= ProgramKind::PdfRgb as u32 && !conserving;
+        let conserving = json.contains("\"conserving\"");
+        let required = (ProgramKind::PdfRgb as u32..=ProgramKind::SampleSpectral as u32)
+            .contains(&kind)
+            || (kind >= ProgramKind::CoherentRgb as u32 && !conserving);
         if n == 0 {
             if required || rust.is_some() {
                 fail(
