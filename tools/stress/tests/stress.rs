@@ -29,8 +29,8 @@ fn stress_1e5_evaluations_clean() {
     );
     assert!(report.compared > 1000, "compared {}", report.compared);
     assert!(report.samples > report.sample_failures + 1000);
-    // The programs were exported and run (sampling, pdf and coherent kinds
-    // at least, for every material but the energy-conserving ones).
+    // The programs were exported and run (the sampling and pdf kinds at
+    // least, for every material).
     assert!(report.programs >= 6, "programs {}", report.programs);
     assert!(
         report.program_runs >= report.programs * options.batch as u64,
