@@ -40,19 +40,6 @@ FLAG_HAS_COHERENT = 1
 FLAG_ANISOTROPIC = 2
 FLAG_SPECTRALLY_VARYING = 4
 
-# Program kinds of stam_brdf_export_program (STAM_PROGRAM_* in stam.h): name ->
-# (code, inputs, outputs).
-PROGRAM_KINDS = {
-    'eval_rgb': (0, 6, 3),
-    'eval_spectral': (1, 7, 1),
-    'pdf_rgb': (2, 6, 1),
-    'pdf_spectral': (3, 7, 1),
-    'sample_rgb': (4, 6, 4),
-    'sample_spectral': (5, 7, 4),
-    'coherent_rgb': (6, 3, 4),
-    'coherent_spectral': (7, 4, 2),
-}
-
 
 def _header_luminance(path=HEADER):
     """(R, G, B) weights of the macros STAM_SRGB_LUMINANCE_R/G/B in stam.h."""
@@ -105,7 +92,6 @@ def lib():
         'stam_brdf_flags': (ctypes.c_uint32, [vp]),
         'stam_brdf_memory_bytes': (sz, [vp]),
         'stam_brdf_export_table': (sz, [vp, fp, sz]),
-        'stam_brdf_export_program': (sz, [vp, ctypes.c_uint32, fp, sz]),
         'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
         'stam_version': (ctypes.c_char_p, []),
     }
@@ -204,21 +190,6 @@ class Brdf:
         written = int(self._lib.stam_brdf_export_table(self._handle(), _ptr(out), n))
         if written != n:
             raise RuntimeError('stam_diffraction.core: export_table wrote %d of %d' % (written, n))
-        return out
-
-    def export_program(self, kind):
-        """The program of `kind` (a key of PROGRAM_KINDS, or its code) as the
-        float32 array of stam_brdf_export_program (layout: docs/jit.md), or
-        None where the material has no program of that kind."""
-        code = PROGRAM_KINDS[kind][0] if isinstance(kind, str) else int(kind)
-        n = int(self._lib.stam_brdf_export_program(self._handle(), code, None, 0))
-        if n == 0:
-            return None
-        out = np.empty(n, dtype=np.float32)
-        written = int(self._lib.stam_brdf_export_program(self._handle(), code, _ptr(out), n))
-        if written != n:
-            raise RuntimeError('stam_diffraction.core: export_program wrote %d of %d'
-                               % (written, n))
         return out
 
     def warnings(self):
@@ -391,91 +362,3 @@ class Brdf:
                 s_wo.astype(np.float64).reshape(shape + (3,)),
                 s_pdf.astype(np.float64).reshape(shape), s_coh.astype(bool).reshape(shape),
                 s_value.astype(np.float64).reshape(shape + (nc,)))
-
-
-# -- programs -------------------------------------------------------------------
-
-# Operation codes of the core's programs (rust-core/src/program/mod.rs, Op).
-PROGRAM_OPS = ('input', 'const', 'add', 'sub', 'mul', 'div', 'min', 'max', 'fma', 'neg',
-               'abs', 'sqrt', 'exp', 'log', 'sin', 'cos', 'atan2', 'floor', 'lt', 'le', 'gt',
-               'ge', 'eq', 'finite', 'and', 'or', 'not', 'select', 'gather')
-PROGRAM_FORMAT = 2
-PROGRAM_HEADER_LEN = 8
-
-
-def program_stats(v):
-    """{'inputs', 'outputs', 'instructions', 'gathers', 'tables', 'table_values'}
-    of an exported program array (its header and code, unchecked)."""
-    v = np.asarray(v, dtype=np.float32)
-    n_out, n_code, n_tab = int(v[2]), int(v[3]), int(v[4])
-    code_at = PROGRAM_HEADER_LEN + n_out + 2 * n_tab
-    ops = v[code_at:code_at + 4 * n_code:4].astype(int)
-    lens = v[PROGRAM_HEADER_LEN + n_out + 1:code_at:2].astype(int)
-    return {'inputs': int(v[1]), 'outputs': n_out, 'instructions': n_code,
-            'gathers': int(np.sum(ops == PROGRAM_OPS.index('gather'))), 'tables': n_tab,
-            'table_values': int(lens.sum())}
-
-
-def run_program(v, inputs, dtype=np.float64):
-    """Run an exported program array on the CPU with numpy, lane by lane as
-    the core's executor (program::Program::run): inputs is a sequence of
-    n_inputs arrays (broadcast together); returns the list of outputs.
-    A reference for tests of the renderers' executors (the plugin's
-    program.h); dtype float32 rounds every operation as a renderer's kernel
-    does (up to the last bits of exp, log, sin, cos)."""
-    v = np.asarray(v, dtype=np.float32)
-    if len(v) < PROGRAM_HEADER_LEN or int(v[0]) != PROGRAM_FORMAT or int(v[5]) != len(v):
-        raise ValueError('stam_diffraction.core: not a program array of format %d'
-                         % PROGRAM_FORMAT)
-    n_in, n_out, n_code, n_tab = (int(x) for x in v[1:5])
-    if len(inputs) != n_in:
-        raise ValueError('stam_diffraction.core: the program takes %d inputs, %d given'
-                         % (n_in, len(inputs)))
-    dir_at = PROGRAM_HEADER_LEN + n_out
-    code_at = dir_at + 2 * n_tab
-    tables = [v[int(v[dir_at + 2 * t]):int(v[dir_at + 2 * t]) + int(v[dir_at + 2 * t + 1])]
-              for t in range(n_tab)]
-    ins = np.broadcast_arrays(*[np.asarray(x, dtype=dtype) for x in inputs])
-    regs = []
-    with np.errstate(all='ignore'):
-        for i in range(n_code):
-            w = v[code_at + 4 * i:code_at + 4 * i + 4]
-            op = PROGRAM_OPS[int(w[0])]
-            if op == 'const':
-                regs.append(dtype(w[1]))
-                continue
-            a, b, c = (int(x) for x in w[1:])
-            if op == 'input':
-                r = ins[a]
-            elif op == 'gather':
-                t = tables[a]
-                x = np.asarray(regs[b], dtype=np.float64)
-                if len(t) == 0:
-                    r = np.zeros_like(x, dtype=dtype)
-                else:
-                    x = np.clip(np.where(np.isnan(x), 0.0, x), 0.0, len(t) - 1)
-                    r = t[x.astype(np.int64)].astype(dtype)
-            else:
-                A = regs[a]
-                B = regs[b] if b < len(regs) else None
-                C = regs[c] if c < len(regs) else None
-                r = {
-                    'add': lambda: A + B, 'sub': lambda: A - B, 'mul': lambda: A * B,
-                    'div': lambda: A / B, 'min': lambda: np.fmin(A, B),
-                    'max': lambda: np.fmax(A, B), 'fma': lambda: A * B + C,
-                    'neg': lambda: -A, 'abs': lambda: np.abs(A), 'sqrt': lambda: np.sqrt(A),
-                    'exp': lambda: np.exp(A), 'log': lambda: np.log(A),
-                    'sin': lambda: np.sin(A), 'cos': lambda: np.cos(A),
-                    'atan2': lambda: np.arctan2(A, B), 'floor': lambda: np.floor(A),
-                    'lt': lambda: A < B, 'le': lambda: A <= B, 'gt': lambda: A > B,
-                    'ge': lambda: A >= B, 'eq': lambda: A == B,
-                    'finite': lambda: np.isfinite(A), 'and': lambda: A & B,
-                    'or': lambda: A | B, 'not': lambda: ~np.asarray(A, dtype=bool),
-                    'select': lambda: np.where(A, B, C),
-                }[op]()
-                if r.dtype != bool:
-                    r = r.astype(dtype)
-            regs.append(r)
-    outs = [int(x) for x in v[PROGRAM_HEADER_LEN:PROGRAM_HEADER_LEN + n_out]]
-    shape = ins[0].shape if ins else ()
-    return [np.broadcast_to(np.asarray(regs[o], dtype=dtype), shape).copy() for o in outs]
