@@ -50,6 +50,8 @@ mod math;
 pub mod params;
 mod profile;
 mod program;
+#[cfg(test)]
+mod program_tests;
 mod sampling;
 #[cfg(test)]
 mod tests;

@@ -68,6 +68,27 @@ pub struct ProfileDiagnostics {
     pub y_max: f64,
 }
 
+/// The profile as `ln_phi_at_ln` evaluates it (`StableProfile::program_parts`):
+/// ln Phi(e^y) = ln_phi0 + ln(1 + sum_n small_c[n-1] v^n), v = e^(2 (y - y0)),
+/// for y < y0; the Hermite cubic of cell i = floor(s), s = (y - y0) inv_h,
+/// at t = s - i for s < last_s; ln_a1 - (alpha + 2) y + ln(1 + sum_j
+/// large_r[j-2] u^(j-1)), u = e^(-alpha (y - y_last)), beyond. alpha = 2
+/// (`gaussian`): ln pi - e^(2y)/4, nothing else set.
+pub(super) struct ProfileParts {
+    pub alpha: f64,
+    pub gaussian: bool,
+    pub ln_phi0: f64,
+    pub small_c: Vec<f64>,
+    pub y0: f64,
+    pub inv_h: f64,
+    pub last_s: f64,
+    pub y_last: f64,
+    pub ln_a1: f64,
+    pub large_r: Vec<f64>,
+    /// Per cell: the cubic's coefficients in t.
+    pub cells: Vec<[f64; 4]>,
+}
+
 type Cache = Mutex<Vec<(u64, Arc<ProfileData>)>>;
 
 fn cache() -> &'static Cache {
@@ -200,6 +221,37 @@ impl StableProfile {
         std::mem::size_of::<ProfileData>()
             + 8 * (d.small_c.capacity() + d.large_r.capacity())
             + 16 * (d.table.capacity() + d.cdf.capacity() + d.cdf_slopes.capacity())
+    }
+
+    /// What `ln_phi_at_ln` reads, for the programs (`program.rs`): the
+    /// same switch points, run-time series and table, the table as the
+    /// coefficients of each cell's Hermite cubic in t (`hermite` expanded:
+    /// c0 + t (c1 + t (c2 + t c3))).
+    pub(super) fn program_parts(&self) -> ProfileParts {
+        let d = &*self.inner;
+        let h = d.h;
+        let cells = d
+            .table
+            .windows(2)
+            .map(|w| {
+                let ([f0, d0], [f1, d1]) = (w[0], w[1]);
+                let (hd0, hd1, df) = (h * d0, h * d1, f1 - f0);
+                [f0, hd0, 3.0 * df - 2.0 * hd0 - hd1, hd0 + hd1 - 2.0 * df]
+            })
+            .collect();
+        ProfileParts {
+            alpha: d.alpha,
+            gaussian: d.gaussian,
+            ln_phi0: d.ln_phi0,
+            small_c: d.small_c.clone(),
+            y0: d.y0,
+            inv_h: d.inv_h,
+            last_s: d.last_s,
+            y_last: d.y_last,
+            ln_a1: d.ln_a1,
+            large_r: d.large_r.clone(),
+            cells,
+        }
     }
 
     pub fn diagnostics(&self) -> ProfileDiagnostics {

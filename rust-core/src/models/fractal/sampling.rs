@@ -81,3 +81,115 @@ impl Fractal {
         }
     }
 }
+
+/// Tail mass left outside the proposal's grid on either side.
+const PROPOSAL_TAIL: f64 = 1e-4;
+/// Target cell width of the proposal in ln x.
+const PROPOSAL_CELL: f64 = 0.025;
+const PROPOSAL_MAX_CELLS: usize = 2048;
+
+/// The lobe's radial law for the sampling programs (`program.rs`): a
+/// density of y = ln x, x = c |(u, v)| (c = k times the projected scale,
+/// as in [`Lobe`]), that follows the profile's, rho(y) = Phi(e^y) e^(2y) /
+/// (2 pi), and has an exact inverse without a search. `cells` equal cells
+/// of width `h` from `y_lo` to `y_lo + cells h` interpolate rho linearly
+/// between its values at the cell edges; below y_lo it continues as
+/// rho(y_lo) e^(2 (y - y_lo)) (Phi is flat near 0), above as rho(y_hi)
+/// e^(-alpha (y - y_hi)) (Phi's power-law tail for alpha < 2; heavier than
+/// the Gaussian one at alpha = 2), so that the density is continuous. An
+/// alias table over the cells and the two tails picks an entry with two
+/// gathers; the position inside a cell inverts the linear density in
+/// closed form. The densities are taken from the alias table as stored in
+/// f32, so that the pdf is exactly the law the program samples.
+pub(super) struct RadialProposal {
+    pub alpha: f64,
+    pub y_lo: f64,
+    pub h: f64,
+    pub cells: usize,
+    /// Per entry (the cells, then the tails below and above): the
+    /// probability of keeping the entry, then the alias it passes the rest
+    /// to.
+    pub alias: Vec<f32>,
+    /// Per cell: the density at its lower and upper edge.
+    pub density: Vec<f32>,
+    /// ln(2 P_below): the density below y_lo is 2 P_below e^(2 (y - y_lo)).
+    pub ln_below: f64,
+    /// ln(alpha P_above): above y_hi it is alpha P_above e^(-alpha (y - y_hi)).
+    pub ln_above: f64,
+    /// ln b: the lobe's share inside |(u, v)| < 1 (`radial_cdf(c)` in
+    /// `build_component`) is taken as 1 - (1 + c^2 / b)^(-alpha / 2), the
+    /// closed form with the profile's median (a mixture weight only needs
+    /// to be a fixed function of the incidence).
+    pub ln_inside_b: f64,
+}
+
+impl RadialProposal {
+    pub(super) fn new(profile: &super::StableProfile) -> RadialProposal {
+        let alpha = profile.alpha();
+        let y_lo = profile.inverse_radial_cdf_ln(PROPOSAL_TAIL);
+        let y_hi = profile.inverse_radial_ccdf_ln(PROPOSAL_TAIL);
+        let cells = (((y_hi - y_lo) / PROPOSAL_CELL).ceil() as usize).clamp(16, PROPOSAL_MAX_CELLS);
+        let h = (y_hi - y_lo) / cells as f64;
+        // rho at the edges, up to a common factor (ln, so that tiny alpha
+        // does not overflow).
+        let ln_rho: Vec<f64> = (0..=cells)
+            .map(|i| {
+                let y = y_lo + i as f64 * h;
+                profile.ln_phi_at_ln(y) + 2.0 * y
+            })
+            .collect();
+        let top = ln_rho.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let rho: Vec<f64> = ln_rho.iter().map(|l| (l - top).exp()).collect();
+        let mut mass: Vec<f64> = rho.windows(2).map(|w| 0.5 * h * (w[0] + w[1])).collect();
+        mass.push(0.5 * rho[0]);
+        mass.push(rho[cells] / alpha);
+        let total: f64 = mass.iter().sum();
+        let entries = mass.len();
+        // Vose's alias method on the masses scaled to a mean of 1.
+        let mut scaled: Vec<f64> = mass.iter().map(|m| m / total * entries as f64).collect();
+        let mut keep = vec![1.0; entries];
+        let mut alias: Vec<usize> = (0..entries).collect();
+        let (mut small, mut large): (Vec<usize>, Vec<usize>) =
+            (0..entries).partition(|&i| scaled[i] < 1.0);
+        while let (Some(s), Some(&l)) = (small.pop(), large.last()) {
+            keep[s] = scaled[s];
+            alias[s] = l;
+            scaled[l] -= 1.0 - scaled[s];
+            if scaled[l] < 1.0 {
+                large.pop();
+                small.push(l);
+            }
+        }
+        let alias_table: Vec<f32> = (0..entries)
+            .flat_map(|e| [keep[e] as f32, alias[e] as f32])
+            .collect();
+        // The law as stored: entry e keeps itself with probability keep
+        // (f32) and passes the rest to its alias.
+        let mut p = vec![0.0; entries];
+        for e in 0..entries {
+            let k = alias_table[2 * e] as f64;
+            p[e] += k / entries as f64;
+            p[alias[e]] += (1.0 - k) / entries as f64;
+        }
+        let density = (0..cells)
+            .flat_map(|i| {
+                let scale = if mass[i] > 0.0 { p[i] / mass[i] } else { 0.0 };
+                [(rho[i] * scale) as f32, (rho[i + 1] * scale) as f32]
+            })
+            .collect();
+        // x_med^2 / b = 2^(2/alpha) - 1.
+        let z = 2.0 / alpha * std::f64::consts::LN_2;
+        let ln_expm1 = if z > 30.0 { z } else { z.exp_m1().ln() };
+        RadialProposal {
+            alpha,
+            y_lo,
+            h,
+            cells,
+            alias: alias_table,
+            density,
+            ln_below: (2.0 * p[cells]).ln(),
+            ln_above: (alpha * p[cells + 1]).ln(),
+            ln_inside_b: 2.0 * profile.inverse_radial_cdf_ln(0.5) - ln_expm1,
+        }
+    }
+}
