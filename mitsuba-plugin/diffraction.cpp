@@ -4,13 +4,18 @@
  * This file contains no physics. It converts Mitsuba properties into the JSON
  * parameter object of the Rust core (rust-core/include/stam.h; params_json.h),
  * builds the local frame the core expects (twist, concentric tracks), and
- * forwards eval / pdf / sample to the core's batch C ABI (batch.h stages the
- * arrays into host buffers, makes the call and loads the results back).
+ * forwards eval / pdf / sample to the core.
  *
- * Variants: scalar_* call the core per query; llvm_ad_* run in Dr.Jit's
- * evaluated mode (dr.JitFlag.SymbolicLoops / SymbolicCalls off) and call the
- * core once per batch; cuda_ad_* compile but refuse construction (the core is
- * CPU code). See scripts/stam_mitsuba.py for the Python-side setup.
+ * Variants: scalar_* call the core's batch C ABI per query (batch.h stages
+ * the arrays into host buffers, makes the call and loads the results back).
+ * JIT variants (llvm_ad_*, cuda_ad_*) execute the core's programs
+ * (stam_brdf_export_program: straight-line array code and its tables,
+ * exported once per material) with Dr.Jit operations (program.h), so that
+ * Dr.Jit traces them with its default flags: symbolic loops and calls,
+ * dr.freeze, on LLVM and CUDA, with no host round trip. A material whose
+ * programs the core does not export ("energy": "conserving" for now) runs
+ * in llvm_ad_* through the batch ABI in evaluated mode (dr.JitFlag.
+ * SymbolicLoops / SymbolicCalls off), and is refused in cuda_ad_*.
  *
  * Layout (as Mitsuba's roughconductor.cpp): the manual, the constructor,
  * traverse, parameters_changed, the BSDF methods, to_string, then the
@@ -33,6 +38,7 @@
 #include "../rust-core/include/stam.h"
 #include "batch.h"
 #include "params_json.h"
+#include "program.h"
 
 NAMESPACE_BEGIN(mitsuba)
 
@@ -219,9 +225,16 @@ query goes to the core's path-vertex calls in one call per batch
 sample). Monochromatic variants take the luminance of the core's RGB output
 (with the core's weights, ``STAM_SRGB_LUMINANCE_*`` in stam.h).
 
-LLVM variants need evaluated mode: ``dr.set_flag(dr.JitFlag.SymbolicLoops,
-False)`` and ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``, which
-``scripts/stam_mitsuba.py``'s ``setup()`` does.
+JIT variants (``llvm_ad_*``, ``cuda_ad_*``) run the programs the core exports
+for the material (``stam_brdf_export_program``) as Dr.Jit operations: they
+work with Dr.Jit's default flags (symbolic loops and calls, ``dr.freeze``).
+Their sampling is the programs' strategy (in spectral variants: one of the
+path's wavelengths picked by the first sample, the pdf the mean of the
+wavelengths' densities, as above). A material without programs
+(``"energy": "conserving"`` for now) runs in ``llvm_ad_*`` variants only in
+Dr.Jit's evaluated mode (``dr.JitFlag.SymbolicLoops`` and ``SymbolicCalls``
+off, which ``scripts/stam_mitsuba.py``'s ``setup()`` does) and is refused by
+``cuda_ad_*`` variants.
 
 .. tabs::
     .. code-tab:: xml
@@ -255,6 +268,7 @@ using diffraction_detail::parse_profile_heights;
 using diffraction_detail::run_batch;
 using diffraction_detail::Scratch;
 using diffraction_detail::with_plugin_keys;
+namespace program = diffraction_detail::program;
 
 template <typename Float, typename Spectrum>
 class Diffraction final : public BSDF<Float, Spectrum> {
@@ -265,6 +279,8 @@ public:
     enum class Tracks { Linear, Concentric };
 
     using IO = BatchIO<Float, Spectrum>;
+    using Prog = program::Program<Float>;
+    using FloatStorage = DynamicBuffer<Float>;
 
     /// The plugin's own keys, which the core does not know (for messages).
     static const std::vector<std::string> &plugin_keys() {
@@ -274,9 +290,6 @@ public:
     }
 
     Diffraction(const Properties &props) : Base(props) {
-        if constexpr (dr::is_cuda_v<Float>)
-            Throw("diffraction: CUDA variants are not supported (the Rust core "
-                  "runs on the CPU): use an llvm_ad_* or scalar_* variant.");
         static_assert(!IO::IsSpectral || IO::NW == IO::NC, "unexpected spectrum layout");
 
         // Plugin-level parameters are handled here; everything else is
@@ -521,12 +534,23 @@ private:
         Tracks tracks = Tracks::Linear;
     };
 
+    /// The JIT path of a material (JIT variants): the core's programs of the
+    /// kinds this variant runs, decoded and checked, and their tables (host
+    /// values until commit() loads them into one device array)
+    struct JitPrograms {
+        bool ready = false;  // every kind this variant needs exists
+        std::string missing; // else: the kinds the core does not export
+        Prog eval, pdf, sample, coherent;
+        std::vector<float> tables;
+    };
+
     /// A core material built from the current parameters, not yet in use
     struct Core {
         CorePtr ptr;
         std::string json;
         uint32_t flags = 0;
         std::string warnings;
+        JitPrograms jit;
     };
 
     /// Everything one call can ask of the core, in the local frame
@@ -645,7 +669,66 @@ private:
                 err[0] ? err : "the core refused the parameters", plugin_keys()));
         c.flags = stam_brdf_flags(c.ptr.get());
         c.warnings = stam_brdf_warnings(c.ptr.get());
+        if constexpr (dr::is_jit_v<Float>) {
+            try {
+                c.jit = build_programs(c.ptr.get());
+            } catch (const program::Malformed &e) {
+                throw ParamError(std::string("the core's program is unusable (a plugin "
+                                             "built against another core?): ") + e.what());
+            }
+            if (dr::is_cuda_v<Float> && !c.jit.ready)
+                throw ParamError("CUDA variants run the core's programs, and this material "
+                                 "has none of kind " + c.jit.missing + " (\"energy\": "
+                                 "\"conserving\" has no programs yet, nor do surface models "
+                                 "whose programs are not written): use an llvm_ad_* variant "
+                                 "(evaluated mode) or a scalar_* one");
+        }
         return c;
+    }
+
+    /// The programs this variant runs (RGB kinds for RGB and monochromatic
+    /// variants, spectral kinds for spectral ones), each checked against the
+    /// inputs and outputs stam.h gives its kind. Not ready (with the missing
+    /// kinds named) where the core exports no program of one of them.
+    static JitPrograms build_programs(const StamBrdf *core) {
+        JitPrograms j;
+        constexpr bool sp = IO::IsSpectral;
+        struct Kind {
+            uint32_t code;
+            const char *name;
+            size_t inputs, outputs;
+            Prog *dst;
+        };
+        const Kind kinds[] = {
+            { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB,
+              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.eval },
+            { sp ? STAM_PROGRAM_PDF_SPECTRAL : STAM_PROGRAM_PDF_RGB,
+              sp ? "PDF_SPECTRAL" : "PDF_RGB", sp ? 7u : 6u, 1u, &j.pdf },
+            { sp ? STAM_PROGRAM_SAMPLE_SPECTRAL : STAM_PROGRAM_SAMPLE_RGB,
+              sp ? "SAMPLE_SPECTRAL" : "SAMPLE_RGB", sp ? 7u : 6u, 4u, &j.sample },
+            { sp ? STAM_PROGRAM_COHERENT_SPECTRAL : STAM_PROGRAM_COHERENT_RGB,
+              sp ? "COHERENT_SPECTRAL" : "COHERENT_RGB", sp ? 4u : 3u, sp ? 2u : 4u,
+              &j.coherent },
+        };
+        for (const Kind &k : kinds) {
+            std::vector<float> v = program::export_program(core, k.code);
+            if (v.empty()) {
+                j.missing += (j.missing.empty() ? "" : ", ") + std::string(k.name);
+                continue;
+            }
+            Prog p(v, j.tables);
+            if (p.n_inputs() != k.inputs || p.n_outputs() != k.outputs)
+                throw program::Malformed(
+                    std::string(k.name) + " takes " + std::to_string(p.n_inputs()) +
+                    " inputs and gives " + std::to_string(p.n_outputs()) +
+                    " outputs, stam.h says " + std::to_string(k.inputs) + " and " +
+                    std::to_string(k.outputs));
+            *k.dst = std::move(p);
+        }
+        j.ready = j.missing.empty();
+        if (!j.ready)
+            j = JitPrograms{ false, j.missing, {}, {}, {}, {}, {} };
+        return j;
     }
 
     void commit(Core &&c) {
@@ -653,6 +736,18 @@ private:
         m_json = std::move(c.json);
         m_core_flags = c.flags;
         m_pending_warnings = std::move(c.warnings);
+        if constexpr (dr::is_jit_v<Float>) {
+            m_jit_ready = c.jit.ready;
+            m_jit_missing = c.jit.missing;
+            m_eval = std::move(c.jit.eval);
+            m_pdf = std::move(c.jit.pdf);
+            m_sample = std::move(c.jit.sample);
+            m_coherent = std::move(c.jit.coherent);
+            // One array per material (device memory on CUDA), never empty
+            if (c.jit.tables.empty())
+                c.jit.tables.push_back(0.f);
+            m_tables = dr::load<FloatStorage>(c.jit.tables.data(), c.jit.tables.size());
+        }
         double t = (double) m_twist * M_PI / 180.0;
         m_cos_twist = (ScalarFloat) std::cos(t);
         m_sin_twist = (ScalarFloat) std::sin(t);
@@ -723,7 +818,16 @@ private:
         };
         UInt32 kind;
         if constexpr (dr::is_jit_v<Float>) {
-            IO::require_evaluated_mode();
+            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope)) {
+                // Recorded code has no values to look at: the shape's type
+                // through Mitsuba's vectorised getter; a mesh without uv
+                // that carries this material is found among the registered
+                // shapes while the code is recorded.
+                check_registered_meshes();
+                UInt32 type = si.shape->shape_type(active);
+                return dr::select(type == (uint32_t) +ShapeType::Disk, UInt32((uint32_t) PolarDisk),
+                                  UInt32((uint32_t) UvShape));
+            }
             kind = dr::dispatch(
                 si.shape,
                 [&kind_of](const Shape *shape, Mask lanes) {
@@ -734,13 +838,33 @@ private:
             kind = active ? kind_of(si.shape) : (uint32_t) UvShape;
         }
         if (dr::any(active && kind == (uint32_t) MeshWithoutUv))
-            Throw("diffraction: tracks = \"%s\" on a mesh without texture coordinates%s: "
-                  "the tracks' direction is defined through the uv parametrisation "
-                  "(linear tracks follow dp/du, concentric ones circle a uv centre), "
-                  "which such a mesh lacks (Mitsuba gives each triangle its own). Give "
-                  "the mesh uv coordinates, or use a disk or rectangle shape.",
-                  tracks_name(m_tracks), bad_mesh.empty() ? "" : " (\"" + bad_mesh + "\")");
+            throw_mesh_without_uv(bad_mesh);
         return kind;
+    }
+
+    [[noreturn]] void throw_mesh_without_uv(const std::string &mesh) const {
+        Throw("diffraction: tracks = \"%s\" on a mesh without texture coordinates%s: "
+              "the tracks' direction is defined through the uv parametrisation "
+              "(linear tracks follow dp/du, concentric ones circle a uv centre), "
+              "which such a mesh lacks (Mitsuba gives each triangle its own). Give "
+              "the mesh uv coordinates, or use a disk or rectangle shape.",
+              tracks_name(m_tracks), mesh.empty() ? "" : " (\"" + mesh + "\")");
+    }
+
+    /// JIT variants, recorded code: throws when a registered shape that
+    /// carries this material is a mesh without texture coordinates (the
+    /// evaluated mode's per-lane test, done for every such shape while the
+    /// code is recorded, since it cannot look at the lanes).
+    void check_registered_meshes() const {
+        if constexpr (dr::is_jit_v<Float>) {
+            const char *variant = Shape::Variant, *domain = Shape::Domain;
+            uint32_t bound = jit_registry_id_bound(variant, domain);
+            for (uint32_t id = 1; id <= bound; ++id) {
+                auto *shape = (const Shape *) jit_registry_ptr(variant, domain, id);
+                if (shape && shape->bsdf() == this && shape_kind(shape) == MeshWithoutUv)
+                    throw_mesh_without_uv(std::string(shape->id()));
+            }
+        }
     }
 
     /// Rotation (c, s) of the core's tangent (the periodic direction of
@@ -801,6 +925,20 @@ private:
     Query make_query(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                      const Vector3f *wo, const Float *sample1, const Point2f *sample2,
                      bool want_value, bool want_pdf, Mask active) const {
+        if constexpr (dr::is_jit_v<Float>) {
+            if (m_jit_ready)
+                return jit_query(ctx, si, wo, sample1, sample2, want_value, want_pdf, active);
+            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
+                Throw("diffraction: the core exports no program of kind %s for this "
+                      "material (\"energy\": \"conserving\" has none yet, nor do surface "
+                      "models whose programs are not written), so it runs through the "
+                      "native core, which needs concrete arrays; but this call is being "
+                      "recorded symbolically. Disable dr.JitFlag.SymbolicLoops and "
+                      "dr.JitFlag.SymbolicCalls (evaluated mode): "
+                      "stam_diffraction.set_evaluated_mode(), or `mitsuba -W -W` on the "
+                      "command line; do not use dr.freeze with this material.",
+                      m_jit_missing);
+        }
         Query q;
         q.value = dr::zeros<UnpolarizedSpectrum>();
         q.pdf = dr::zeros<Float>();
@@ -880,6 +1018,171 @@ private:
         return q;
     }
 
+    // ---- The JIT path: the core's programs as Dr.Jit operations -----------
+
+    /// The same query as make_query through the programs (JIT variants with
+    /// programs): Dr.Jit traces it in every mode (symbolic loops and calls,
+    /// dr.freeze, wavefront), on LLVM and CUDA, with no host round trip.
+    Query jit_query(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                    const Vector3f *wo, const Float *sample1, const Point2f *sample2,
+                    bool want_value, bool want_pdf, Mask active) const {
+        Query q;
+        q.value = dr::zeros<UnpolarizedSpectrum>();
+        q.pdf = dr::zeros<Float>();
+        q.bs = dr::zeros<BSDFSample3f>();
+        q.weight = dr::zeros<UnpolarizedSpectrum>();
+
+        const bool glossy = ctx.is_enabled(BSDFFlags::GlossyReflection, 0),
+                   delta = m_has_coherent && ctx.is_enabled(BSDFFlags::DeltaReflection, 1);
+        const bool do_eval = wo && glossy && (want_value || want_pdf),
+                   do_sample = sample1 && sample2 && (glossy || delta);
+        if (!do_eval && !do_sample)
+            return q;
+
+        Float cos_i = Frame3f::cos_theta(si.wi);
+        Mask active_e = active && cos_i > 0.f, active_s = active_e;
+        if (do_eval)
+            active_e &= Frame3f::cos_theta(*wo) > 0.f;
+        if (dr::none_or<false>(active_e || active_s))
+            return q;
+
+        auto [c, s] = frame_rotation(si, active_e || active_s);
+        Vector3f wi_c = to_core(si.wi, c, s);
+        const Wavelength &wl = si.wavelengths;
+
+        if (do_eval) {
+            Vector3f wo_c = to_core(*wo, c, s);
+            if (want_value)
+                q.value = dr::select(active_e, jit_f(wi_c, wo_c, wl) * Frame3f::cos_theta(*wo),
+                                     0.f);
+            if (want_pdf)
+                q.pdf = dr::select(active_e, jit_pdf(wi_c, wo_c, wl), 0.f);
+        }
+
+        if (do_sample) {
+            auto [swo_c, coh] = jit_sample(wi_c, *sample1, *sample2, wl);
+            Vector3f swo = from_core(swo_c, c, s);
+            Float cos_o = Frame3f::cos_theta(swo);
+            // Glossy: f cos / pdf, both at the sampled direction
+            UnpolarizedSpectrum f = jit_f(wi_c, swo_c, wl);
+            Float spdf = jit_pdf(wi_c, swo_c, wl);
+            UnpolarizedSpectrum value = f * cos_o;
+            if (m_has_coherent) {
+                // Coherent: the lobe's reflectance / its probability
+                auto [r, p_c] = jit_coherent(wi_c, wl);
+                spdf = dr::select(coh, p_c, spdf);
+                value = dr::select(coh, r, value);
+            }
+            Mask ok = active_s && spdf > 0.f && cos_o > 0.f &&
+                      dr::select(coh, Mask(delta), Mask(glossy));
+
+            q.bs.wo = swo;
+            q.bs.pdf = dr::select(ok, spdf, 0.f);
+            q.bs.eta = 1.f;
+            q.bs.sampled_component = dr::select(coh, UInt32(1), UInt32(0));
+            q.bs.sampled_type = dr::select(coh, UInt32(+BSDFFlags::DeltaReflection),
+                                           UInt32(+BSDFFlags::GlossyReflection));
+            q.weight = dr::select(ok, value * dr::rcp(spdf), 0.f);
+        }
+        return q;
+    }
+
+    /// The inputs of a program: the directions (core frame), then extras
+    static std::vector<Float> inputs(const Vector3f &a, const Vector3f *b,
+                                     std::initializer_list<Float> extra) {
+        std::vector<Float> in{ a.x(), a.y(), a.z() };
+        if (b)
+            in.insert(in.end(), { b->x(), b->y(), b->z() });
+        in.insert(in.end(), extra);
+        return in;
+    }
+
+    /// A program's RGB outputs as the variant's spectrum (monochromatic:
+    /// their luminance, with the core's weights, as batch.h)
+    static UnpolarizedSpectrum from_rgb(const std::vector<Float> &o) {
+        if constexpr (IO::IsMono) {
+            UnpolarizedSpectrum r;
+            r[0] = (float) STAM_SRGB_LUMINANCE_R * o[0] + (float) STAM_SRGB_LUMINANCE_G * o[1] +
+                   (float) STAM_SRGB_LUMINANCE_B * o[2];
+            return r;
+        } else {
+            return UnpolarizedSpectrum(o[0], o[1], o[2]);
+        }
+    }
+
+    /// f(wi, wo) without cos, at each of the path's wavelengths (spectral)
+    /// or in RGB
+    UnpolarizedSpectrum jit_f(const Vector3f &wi, const Vector3f &wo,
+                              const Wavelength &wl) const {
+        if constexpr (IO::IsSpectral) {
+            UnpolarizedSpectrum f;
+            for (size_t j = 0; j < IO::NW; ++j)
+                f[j] = m_eval.run(inputs(wi, &wo, { wl[j] }), m_tables)[0];
+            return f;
+        } else {
+            DRJIT_MARK_USED(wl);
+            return from_rgb(m_eval.run(inputs(wi, &wo, {}), m_tables));
+        }
+    }
+
+    /// The glossy density at wo; spectral: the mean of the wavelengths'
+    /// densities, the density of jit_sample's mixture
+    Float jit_pdf(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl) const {
+        if constexpr (IO::IsSpectral) {
+            Float p = 0.f;
+            for (size_t j = 0; j < IO::NW; ++j)
+                p += m_pdf.run(inputs(wi, &wo, { wl[j] }), m_tables)[0];
+            return p * (1.f / IO::NW);
+        } else {
+            DRJIT_MARK_USED(wl);
+            return m_pdf.run(inputs(wi, &wo, {}), m_tables)[0];
+        }
+    }
+
+    /// A direction from the SAMPLE program (core frame) and whether it is
+    /// the coherent lobe's. Spectral: sample1 picks one of the path's
+    /// wavelengths uniformly and is remapped to [0, 1) for the program.
+    std::pair<Vector3f, Mask> jit_sample(const Vector3f &wi, const Float &sample1,
+                                         const Point2f &sample2, const Wavelength &wl) const {
+        std::vector<Float> o;
+        if constexpr (IO::IsSpectral) {
+            Float x = sample1 * (float) IO::NW;
+            Float j = dr::clip(dr::floor(x), 0.f, (float) (IO::NW - 1));
+            Float u0 = dr::clip(x - j, 0.f, dr::OneMinusEpsilon<Float>);
+            Float lambda = wl[0];
+            for (size_t k = 1; k < IO::NW; ++k)
+                lambda = dr::select(j == (float) k, wl[k], lambda);
+            o = m_sample.run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }),
+                             m_tables);
+        } else {
+            DRJIT_MARK_USED(wl);
+            o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }),
+                             m_tables);
+        }
+        return { Vector3f(o[0], o[1], o[2]), o[3] > .5f };
+    }
+
+    /// The coherent lobe at wi: its reflectance and the probability that
+    /// jit_sample picks it (spectral: the mean over the path's wavelengths,
+    /// the mixture's probability of the common mirror direction)
+    std::pair<UnpolarizedSpectrum, Float> jit_coherent(const Vector3f &wi,
+                                                        const Wavelength &wl) const {
+        if constexpr (IO::IsSpectral) {
+            UnpolarizedSpectrum r;
+            Float p = 0.f;
+            for (size_t j = 0; j < IO::NW; ++j) {
+                std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, { wl[j] }), m_tables);
+                r[j] = o[0];
+                p += o[1];
+            }
+            return { r, p * (1.f / IO::NW) };
+        } else {
+            DRJIT_MARK_USED(wl);
+            std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, {}), m_tables);
+            return { from_rgb(o), o[3] };
+        }
+    }
+
     std::pair<UnpolarizedSpectrum, Float>
     eval_pdf_impl(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                   const Vector3f &wo, bool want_value, bool want_pdf, Mask active) const {
@@ -910,7 +1213,15 @@ private:
     bool m_has_coherent = false;
     std::string m_warnings, m_pending_warnings; // logged, and of the core in use
 
-    MI_TRAVERSE_CB(Base)
+    // JIT variants: the core's programs (the JIT path), or the kinds the
+    // core does not export for this material (it then runs through the
+    // native core in evaluated mode)
+    bool m_jit_ready = false;
+    std::string m_jit_missing;
+    Prog m_eval, m_pdf, m_sample, m_coherent;
+    FloatStorage m_tables; // every program's tables, one array
+
+    MI_TRAVERSE_CB(Base, m_tables)
 };
 
 MI_EXPORT_PLUGIN(Diffraction)

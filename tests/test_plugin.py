@@ -510,9 +510,12 @@ def test17_small_scene_finite(variant, surface):
     assert img.mean() > 0
 
 
-def test18_symbolic_mode_refused():
+def test18_symbolic_mode_refused_without_programs():
+    """A material whose programs the core does not export ("energy":
+    "conserving" for now) runs through the native core, in evaluated mode
+    only: a symbolic render says so (tests/test_jit.py: the JIT path)."""
     use('llvm_ad_rgb')
-    scene = mi.load_dict(scene_dict())
+    scene = mi.load_dict(scene_dict(energy='conserving'))
     with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, True), \
             dr.scoped_set_flag(dr.JitFlag.SymbolicCalls, True):
         with pytest.raises(Exception) as e:

@@ -1,0 +1,321 @@
+/* program.h: the generic executor of the core's programs (diffraction.cpp).
+ *
+ * The core describes what a tracing renderer must compute as a *program*:
+ * straight-line SSA code over float lanes (register i = the result of
+ * instruction i) and the tables it reads (rust-core/src/program/, docs/jit.md;
+ * exported by stam_brdf_export_program). This header decodes and checks such
+ * a program (decode_program: every operand defined before its use and of the
+ * right kind, every table inside the array, as the core's own `decode`), and
+ * executes it with Dr.Jit operations, one per instruction (Program::run), so
+ * that Dr.Jit traces it like any other code: symbolic loops and calls,
+ * dr.freeze, LLVM and CUDA alike. No physics: which operations, in which
+ * order, on which tables, is the core's.
+ */
+#pragma once
+
+#include <drjit/array.h>
+#include <drjit/math.h>
+
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "../rust-core/include/stam.h"
+
+namespace mitsuba {
+namespace diffraction_detail {
+namespace program {
+
+namespace dr = ::drjit;
+
+/// Version of the array layout and of the operation set (the core's
+/// program::FORMAT).
+constexpr uint32_t Format = 2;
+/// Values before the outputs (program::HEADER_LEN).
+constexpr size_t HeaderLen = 8;
+
+/// Operation codes, as the core's `program::Op` (rust-core/src/program/mod.rs).
+enum class Op : uint32_t {
+    Input = 0, Const = 1, Add = 2, Sub = 3, Mul = 4, Div = 5, Min = 6, Max = 7,
+    Fma = 8, Neg = 9, Abs = 10, Sqrt = 11, Exp = 12, Log = 13, Sin = 14, Cos = 15,
+    Atan2 = 16, Floor = 17, Lt = 18, Le = 19, Gt = 20, Ge = 21, Eq = 22, Finite = 23,
+    And = 24, Or = 25, Not = 26, Select = 27, Gather = 28
+};
+constexpr uint32_t OpCount = 29;
+
+/// The registers an operation reads (Gather reads only its index, b).
+inline size_t arity(Op op) {
+    switch (op) {
+        case Op::Input: case Op::Const: return 0;
+        case Op::Neg: case Op::Abs: case Op::Sqrt: case Op::Exp: case Op::Log:
+        case Op::Sin: case Op::Cos: case Op::Floor: case Op::Finite: case Op::Not:
+        case Op::Gather:
+            return 1;
+        case Op::Fma: case Op::Select: return 3;
+        default: return 2;
+    }
+}
+
+/// Whether the result is a mask (else a float).
+inline bool gives_mask(Op op) {
+    switch (op) {
+        case Op::Lt: case Op::Le: case Op::Gt: case Op::Ge: case Op::Eq:
+        case Op::Finite: case Op::And: case Op::Or: case Op::Not:
+            return true;
+        default: return false;
+    }
+}
+
+/// Whether operand k of op is a mask (else a float).
+inline bool wants_mask(Op op, size_t k) {
+    switch (op) {
+        case Op::And: case Op::Or: case Op::Not: return true;
+        case Op::Select: return k == 0;
+        default: return false;
+    }
+}
+
+struct Instr {
+    Op op;
+    uint32_t a, b, c; // registers; Input: the input; Const: a's bits; Gather: table, index
+    float value;      // Const
+    /// The registers it reads: a, b, c by arity; Gather: b.
+    uint32_t operand(size_t k) const {
+        if (op == Op::Gather)
+            return b;
+        return k == 0 ? a : (k == 1 ? b : c);
+    }
+};
+
+/// A decoded, checked program: its code, outputs and where its tables lie
+/// in the float array it came from.
+struct Code {
+    uint32_t n_inputs = 0;
+    std::vector<Instr> code;
+    std::vector<uint32_t> outputs;
+    std::vector<size_t> table_offset, table_len; // into the array
+    /// After instruction i, the registers whose last reader it was (so that
+    /// the executor drops them: Dr.Jit then holds only the live ones).
+    std::vector<std::vector<uint32_t>> last_use;
+    size_t gathers = 0;
+};
+
+/// Thrown for an array that is not a well-formed program.
+struct Malformed : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+/// The program of a float array made by the core (`Program::encode`),
+/// checked as the core's `decode` checks it: the format, every integer
+/// exact, every operand a register defined before its use and of the kind
+/// the operation takes, every input and table in range, the outputs floats.
+/// Throws Malformed (saying what is wrong) for anything else.
+inline Code decode_program(const float *v, size_t len) {
+    auto fail = [](const std::string &what) -> void {
+        throw Malformed("malformed program array: " + what);
+    };
+    auto int_at = [&](size_t i, const char *what) -> uint32_t {
+        float x = v[i];
+        if (!(x >= 0.f && x < 16777216.f) || x != std::floor(x))
+            fail(std::string(what) + " is not an integer in [0, 2^24) (value " +
+                 std::to_string(x) + " at " + std::to_string(i) + ")");
+        return (uint32_t) x;
+    };
+    if (!v || len < HeaderLen)
+        fail("shorter than its header (" + std::to_string(len) + " values)");
+    if (int_at(0, "the format") != Format)
+        fail("format " + std::to_string(v[0]) + ", this plugin reads format " +
+             std::to_string(Format) + " (rebuild the plugin with its core)");
+    Code p;
+    p.n_inputs = int_at(1, "the input count");
+    size_t n_out = int_at(2, "the output count"), n_code = int_at(3, "the instruction count"),
+           n_tab = int_at(4, "the table count"), total = int_at(5, "the length");
+    if (total != len)
+        fail("its header says " + std::to_string(total) + " values, the array has " +
+             std::to_string(len));
+    size_t dir = HeaderLen + n_out, code_at = dir + 2 * n_tab, data_at = code_at + 4 * n_code;
+    if (data_at > total)
+        fail("its code runs past its end");
+    for (size_t t = 0; t < n_tab; ++t) {
+        size_t off = int_at(dir + 2 * t, "a table offset"),
+               n = int_at(dir + 2 * t + 1, "a table length");
+        if (off < data_at || off + n > total)
+            fail("table " + std::to_string(t) + " lies outside the table data");
+        p.table_offset.push_back(off);
+        p.table_len.push_back(n);
+    }
+    std::vector<bool> is_mask;
+    std::vector<size_t> last(n_code, 0);
+    p.code.reserve(n_code);
+    for (size_t i = 0; i < n_code; ++i) {
+        size_t at = code_at + 4 * i;
+        uint32_t code = int_at(at, "an operation code");
+        if (code >= OpCount)
+            fail("unknown operation " + std::to_string(code) + " at instruction " +
+                 std::to_string(i));
+        Instr ins;
+        ins.op = (Op) code;
+        ins.value = 0.f;
+        if (ins.op == Op::Const) {
+            ins.value = v[at + 1];
+            ins.a = 0;
+        } else {
+            ins.a = int_at(at + 1, "an operand");
+        }
+        ins.b = int_at(at + 2, "an operand");
+        ins.c = int_at(at + 3, "an operand");
+        if (ins.op == Op::Input && ins.a >= p.n_inputs)
+            fail("instruction " + std::to_string(i) + " reads input " +
+                 std::to_string(ins.a) + " of " + std::to_string(p.n_inputs));
+        if (ins.op == Op::Gather && ins.a >= n_tab)
+            fail("instruction " + std::to_string(i) + " reads table " +
+                 std::to_string(ins.a) + " of " + std::to_string(n_tab));
+        for (size_t k = 0; k < arity(ins.op); ++k) {
+            uint32_t r = ins.operand(k);
+            if (r >= i || is_mask[r] != wants_mask(ins.op, k))
+                fail("instruction " + std::to_string(i) + " reads register " +
+                     std::to_string(r) + (r >= i ? ", not defined before it"
+                                                 : ", of the wrong kind (mask or float)"));
+            last[r] = i;
+        }
+        p.gathers += ins.op == Op::Gather;
+        is_mask.push_back(gives_mask(ins.op));
+        p.code.push_back(ins);
+    }
+    for (size_t k = 0; k < n_out; ++k) {
+        uint32_t r = int_at(HeaderLen + k, "an output register");
+        if (r >= n_code || is_mask[r])
+            fail("output " + std::to_string(k) + " is not a float register");
+        p.outputs.push_back(r);
+        last[r] = n_code; // kept to the end
+    }
+    p.last_use.assign(n_code, {});
+    for (size_t r = 0; r < n_code; ++r)
+        if (last[r] < n_code && last[r] > r)
+            p.last_use[last[r]].push_back((uint32_t) r);
+    return p;
+}
+
+/// The program of `kind` exported by the core material b; an empty vector
+/// where the material has none.
+inline std::vector<float> export_program(const StamBrdf *b, uint32_t kind) {
+    size_t n = stam_brdf_export_program(b, kind, nullptr, 0);
+    std::vector<float> v(n);
+    if (n && stam_brdf_export_program(b, kind, v.data(), n) != n)
+        throw Malformed("the core wrote a program of another length than it announced");
+    return v;
+}
+
+/// A program ready to run with Dr.Jit arrays of type Float (an LLVM or CUDA
+/// array; AD arrays differentiate through it). Its tables live in a buffer
+/// the caller holds (several programs share one, so that a material has a
+/// single device array to load and to traverse for dr.freeze).
+template <typename Float> class Program {
+public:
+    using Mask = dr::mask_t<Float>;
+    using UInt32 = dr::uint32_array_t<Float>;
+
+    Program() = default;
+
+    /// Decode `v` (throws Malformed); its tables are appended to `storage`
+    /// (host values, loaded into the device buffer by the caller).
+    Program(const std::vector<float> &v, std::vector<float> &storage)
+        : m_code(decode_program(v.data(), v.size())) {
+        for (size_t t = 0; t < m_code.table_offset.size(); ++t) {
+            m_table_base.push_back((uint32_t) storage.size());
+            const float *src = v.data() + m_code.table_offset[t];
+            storage.insert(storage.end(), src, src + m_code.table_len[t]);
+        }
+        if (storage.size() >= (size_t(1) << 31))
+            throw Malformed("tables of more than 2^31 values");
+    }
+
+    bool valid() const { return !m_code.code.empty() || !m_code.outputs.empty(); }
+    size_t n_inputs() const { return m_code.n_inputs; }
+    size_t n_outputs() const { return m_code.outputs.size(); }
+    size_t n_instructions() const { return m_code.code.size(); }
+    size_t n_gathers() const { return m_code.gathers; }
+
+    /// The outputs for `inputs` (n_inputs arrays), one Dr.Jit operation per
+    /// instruction; `tables` is the buffer the constructor's storage was
+    /// loaded into.
+    template <typename Storage>
+    std::vector<Float> run(const std::vector<Float> &inputs, const Storage &tables) const {
+        if (inputs.size() != m_code.n_inputs)
+            throw std::runtime_error("program: " + std::to_string(inputs.size()) +
+                                     " inputs given, it takes " +
+                                     std::to_string(m_code.n_inputs));
+        const size_t n = m_code.code.size();
+        std::vector<Float> f(n);
+        std::vector<Mask> m(n);
+        for (size_t i = 0; i < n; ++i) {
+            const Instr &in = m_code.code[i];
+            const Float &fa = f[in.a], &fb = f[in.b], &fc = f[in.c];
+            switch (in.op) {
+                case Op::Input: f[i] = inputs[in.a]; break;
+                case Op::Const: f[i] = Float(in.value); break;
+                case Op::Add: f[i] = fa + fb; break;
+                case Op::Sub: f[i] = fa - fb; break;
+                case Op::Mul: f[i] = fa * fb; break;
+                case Op::Div: f[i] = fa / fb; break;
+                case Op::Min: f[i] = dr::minimum(fa, fb); break;
+                case Op::Max: f[i] = dr::maximum(fa, fb); break;
+                case Op::Fma: f[i] = dr::fmadd(fa, fb, fc); break;
+                case Op::Neg: f[i] = -fa; break;
+                case Op::Abs: f[i] = dr::abs(fa); break;
+                case Op::Sqrt: f[i] = dr::sqrt(fa); break;
+                case Op::Exp: f[i] = dr::exp(fa); break;
+                case Op::Log: f[i] = dr::log(fa); break;
+                case Op::Sin: f[i] = dr::sin(fa); break;
+                case Op::Cos: f[i] = dr::cos(fa); break;
+                case Op::Atan2: f[i] = dr::atan2(fa, fb); break;
+                case Op::Floor: f[i] = dr::floor(fa); break;
+                case Op::Lt: m[i] = fa < fb; break;
+                case Op::Le: m[i] = fa <= fb; break;
+                case Op::Gt: m[i] = fa > fb; break;
+                case Op::Ge: m[i] = fa >= fb; break;
+                case Op::Eq: m[i] = fa == fb; break;
+                case Op::Finite: m[i] = dr::isfinite(fa); break;
+                case Op::And: m[i] = m[in.a] && m[in.b]; break;
+                case Op::Or: m[i] = m[in.a] || m[in.b]; break;
+                case Op::Not: m[i] = !m[in.a]; break;
+                case Op::Select: f[i] = dr::select(m[in.a], fb, fc); break;
+                case Op::Gather: f[i] = gather(in.a, fb, tables); break;
+            }
+            for (uint32_t r : m_code.last_use[i]) {
+                f[r] = Float();
+                m[r] = Mask();
+            }
+        }
+        std::vector<Float> out;
+        out.reserve(m_code.outputs.size());
+        for (uint32_t r : m_code.outputs)
+            out.push_back(f[r]);
+        return out;
+    }
+
+private:
+    /// Table t at the index x: NaN to 0, clamped into [0, len - 1],
+    /// truncated (the core's Op::Gather), so that no lane reads outside it.
+    template <typename Storage>
+    Float gather(uint32_t t, const Float &x, const Storage &tables) const {
+        size_t len = m_code.table_len[t];
+        if (len == 0)
+            return Float(0.f);
+        using FloatD = dr::detached_t<Float>;
+        using UInt32D = dr::uint32_array_t<FloatD>;
+        FloatD xd = dr::detach<false>(x);
+        FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, (float) (len - 1));
+        UInt32 idx = UInt32(UInt32D(xi) + m_table_base[t]);
+        return dr::gather<Float>(tables, idx);
+    }
+
+    Code m_code;
+    std::vector<uint32_t> m_table_base;
+};
+
+} // namespace program
+} // namespace diffraction_detail
+} // namespace mitsuba
