@@ -23,17 +23,25 @@ def out_dir(tmp_path_factory):
     return str(tmp_path_factory.mktemp('compare'))
 
 
-@pytest.mark.parametrize('model', ['gaussian', 'gaussian_aniso', 'fractal', 'periodic', 'cd'])
-def test_rgb_matches_rust_only(model, out_dir):
-    r = compare.check_image(model, 'rgb', 32, 2, out_dir, pictures=False)
+# jit: llvm_ad_rgb / llvm_ad_spectral with Dr.Jit's default flags (the plugin
+# executing the core's programs) instead of scalar_rgb / scalar_spectral, for
+# the models whose programs exist (the periodic ones run in evaluated mode).
+CASES = [(m, False) for m in ('gaussian', 'gaussian_aniso', 'fractal', 'periodic', 'cd')] + \
+    [(m, True) for m in ('gaussian', 'gaussian_aniso', 'fractal')]
+
+
+@pytest.mark.parametrize('model,jit', CASES)
+def test_rgb_matches_rust_only(model, jit, out_dir):
+    r = compare.check_image(model, 'rgb', 32, 2, out_dir, pictures=False, jit=jit)
     assert r['pixels'] > 200
     assert r['mean_ref'] > 0
     assert r['rel_rmse'] <= compare.RMSE_LIMIT, r
 
 
-@pytest.mark.parametrize('model', ['gaussian_aniso', 'periodic'])
-def test_spectral_bands_match_rust_only(model, out_dir):
-    r = compare.check_image(model, 'bands', 32, 4, out_dir, pictures=False)
+@pytest.mark.parametrize('model,jit', [('gaussian_aniso', False), ('periodic', False),
+                                       ('gaussian_aniso', True), ('fractal', True)])
+def test_spectral_bands_match_rust_only(model, jit, out_dir):
+    r = compare.check_image(model, 'bands', 32, 4, out_dir, pictures=False, jit=jit)
     assert r['mean_ref'] > 0
     assert r['bias'] <= compare.RMSE_LIMIT, r
 
