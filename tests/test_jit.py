@@ -888,3 +888,36 @@ def test_decoder_refuses_malformed_arrays(decoder, tmp_path):
                 float(rng.integers(0, 2 * max(n_code, 30)))
         rc, out = decode(decoder, tmp_path, w)
         assert rc in (0, 1), (t, rc, out)
+
+
+# ---------------------------------------------------------------------------
+# The `mitsuba` command with its default variant (llvm_ad_rgb where LLVM is
+# present) and Dr.Jit's default flags renders the project's scenes
+# ---------------------------------------------------------------------------
+
+SCENES_DIR = os.path.join(ROOT, 'scenes')
+
+
+def scene_has_programs(path):
+    """Whether every diffraction material of the scene has the programs of
+    llvm_ad_rgb (the periodic ones are not written yet)."""
+    import re
+    text = open(path).read()
+    return not re.search(r'name="surface" value="(periodic|cd)"', text)
+
+
+@pytest.mark.parametrize('scene', sorted(f for f in os.listdir(SCENES_DIR) if f.endswith('.xml')))
+def test_mitsuba_command_renders_the_scene_with_its_default_variant(scene, tmp_path):
+    path = os.path.join(SCENES_DIR, scene)
+    if not scene_has_programs(path):
+        pytest.skip('%s: the periodic model has no programs yet (evaluated mode: '
+                    '`mitsuba -m scalar_spectral` or llvm_ad_* with -W -W)' % scene)
+    out = str(tmp_path / (scene[:-4] + '.exr'))
+    exe = os.path.join(os.path.dirname(sys.executable), 'mitsuba')
+    env = dict(os.environ)
+    r = subprocess.run([exe, '-a', 'build', '-Dspp=2', '-Dres=24', '-o', out, path],
+                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    use('llvm_ad_rgb')
+    img = np.array(mi.Bitmap(out), dtype=np.float64)
+    assert np.all(np.isfinite(img)) and img.mean() > 0, scene
