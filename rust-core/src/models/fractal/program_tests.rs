@@ -131,12 +131,11 @@ fn spectral_errors_at_program_geometry(brdf: &Brdf, pairs: &[(DVec3, DVec3)], se
 }
 
 /// The spectral eval program against `Brdf::eval_spectral` (the shared
-/// harness: f32 inputs, random, grazing and near-mirror pairs). Where both
-/// directions graze and wo is within ~1e-4 of the mirror direction, |(u,
-/// v)| is a difference of f32 components near 1 and the f32 normalisation
-/// of the inputs alone (the material's `upper_direction`) moves the native
-/// value by up to ~5e-4 (one pair of the 4000 at cos 0.0013, |(u, v)| =
-/// 7e-5); the model's own error is measured at the program's geometry.
+/// harness: f32 inputs, random, grazing and near-mirror pairs), within the
+/// issue's 1e-4. Where both directions graze and wo is within ~1e-4 of the
+/// mirror direction, |(u, v)| is a difference of f32 components near 1: an
+/// f32 normalisation of the inputs before it would move f by up to ~5e-4
+/// (printed for information), which `PairProgram` avoids.
 #[test]
 fn eval_spectral_matches_native() {
     let pairs = pairs(4000, 11);
@@ -146,15 +145,17 @@ fn eval_spectral_matches_native() {
         let e = eval_spectral_errors(&brdf, &pairs, 5);
         let own = spectral_errors_at_program_geometry(&brdf, &pairs, 5);
         println!(
-            "spectral {name:>24}: f32 {:.2e} (at the program's geometry {own:.2e}), f64 {:.2e}, abs {:.2e} ({} checked)",
+            "spectral {name:>24}: f32 {:.2e} (at directions normalised in f32 first: {own:.2e}), f64 {:.2e}, abs {:.2e} ({} checked)",
             e.max_rel_f32, e.max_rel_f64, e.max_abs_f32, e.checked
         );
         assert!(e.checked > 200, "{name}: {} pairs checked", e.checked);
-        assert!(own <= 1e-4, "{name}: f32 {own}");
+        let _ = own;
         assert!(e.max_rel_f64 <= 1e-5, "{name}: f64 {}", e.max_rel_f64);
         worst_harness = worst_harness.max(e.max_rel_f32);
     }
-    assert!(worst_harness <= 2e-3, "f32 {worst_harness}");
+    // PairProgram takes u, v from the inputs as given (exact where they
+    // nearly cancel): the 1e-4 against the native path itself.
+    assert!(worst_harness <= 1e-4, "f32 {worst_harness}");
 }
 
 /// The RGB eval program in f32 against the native path at the program's
@@ -207,15 +208,15 @@ fn eval_rgb_matches_native() {
         let e = eval_rgb_errors(&brdf, &pairs);
         let own = rgb_errors_at_program_geometry(&brdf, &pairs);
         println!(
-            "rgb {name:>24}: f32 {:.2e} (at the program's geometry {own:.2e}), f64 {:.2e}, abs {:.2e} ({} checked)",
+            "rgb {name:>24}: f32 {:.2e} (at directions normalised in f32 first: {own:.2e}), f64 {:.2e}, abs {:.2e} ({} checked)",
             e.max_rel_f32, e.max_rel_f64, e.max_abs_f32, e.checked
         );
         assert!(e.checked > 200, "{name}: {} pairs checked", e.checked);
-        assert!(own <= 5e-5, "{name}: f32 {own}");
+        let _ = own;
         assert!(e.max_rel_f64 <= 1e-5, "{name}: f64 {}", e.max_rel_f64);
         worst_harness = worst_harness.max(e.max_rel_f32);
     }
-    assert!(worst_harness <= 1e-3, "f32 {worst_harness}");
+    assert!(worst_harness <= 1e-4, "f32 {worst_harness}");
 }
 
 /// The spectral program's K near the mirror direction and at the exact
