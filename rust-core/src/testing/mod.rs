@@ -2,7 +2,6 @@
 //! chi-square goodness-of-fit harness of the sampling strategies.
 
 pub mod chi2;
-#[allow(dead_code)] // until every model tests its programs with it
 pub mod programs;
 
 use glam::DVec3;
