@@ -440,7 +440,11 @@ impl Gaussian {
             let usable = d.gt(0.0) & d.finite() & g0.lt(BECKMANN_MIN_G) & p_coh.gt(0.0);
             p_coh = usable.select(p_coh / (p_coh + d), p_coh);
         }
-        p_coh
+        // e^-g0 rounds to 1 in f32 for g0 below 6e-8 (very smooth or
+        // grazing), which would leave the glossy part, and so the pdf where
+        // f > 0, at 0: keep a share of at least 1e-6 (sample and pdf both
+        // read this value, so they stay consistent).
+        p_coh.min(1.0 - 1e-6)
     }
 
     /// The strategy at unit wi (above the horizon) for the wavelength
