@@ -511,11 +511,11 @@ def test17_small_scene_finite(variant, surface):
 
 
 def test18_symbolic_mode_refused_without_programs():
-    """A material whose programs the core does not export ("energy":
-    "conserving" for now) runs through the native core, in evaluated mode
-    only: a symbolic render says so (tests/test_jit.py: the JIT path)."""
+    """A material whose programs the core does not export (the periodic
+    model for now) runs through the native core, in evaluated mode only: a
+    symbolic render says so (tests/test_jit.py: the JIT path)."""
     use('llvm_ad_rgb')
-    scene = mi.load_dict(scene_dict(energy='conserving'))
+    scene = mi.load_dict(scene_dict('cd'))
     with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, True), \
             dr.scoped_set_flag(dr.JitFlag.SymbolicCalls, True):
         with pytest.raises(Exception) as e:
