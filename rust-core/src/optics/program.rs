@@ -49,11 +49,34 @@ pub struct PairProgram<'a> {
 
 impl<'a> PairProgram<'a> {
     pub fn new(b: &'a Builder, wi: Vec3<'a>, wo: Vec3<'a>) -> PairProgram<'a> {
-        let (wi, ok_i) = upper_direction(b, wi);
-        let (wo, ok_o) = upper_direction(b, wo);
-        let u = -(wi[0] + wo[0]);
-        let v = -(wi[1] + wo[1]);
-        let w = -(wi[2] + wo[2]);
+        let (wi_unit, ok_i) = upper_direction(b, wi);
+        let (wo_unit, ok_o) = upper_direction(b, wo);
+        // -(wi + wo) from the vectors as given: per component inv_m (di +
+        // do) + (inv_i - inv_o) (di - do) / 2 (inv = 1 / length, inv_m their
+        // mean), with inv_i - inv_o from |di|^2 - |do|^2 = sum (di + do)(di -
+        // do). Where the directions nearly cancel (both grazing, near the
+        // mirror) di + do is exact and so is the result to f32 rounding,
+        // while the sum of the normalised components would carry their
+        // rounding (3e-8 each: 1e-4 of 1 + wi.wo at cos 1e-4).
+        let raw = |d: Vec3<'a>, ok: Mask<'a>| {
+            [
+                ok.select(d[0], 0.0),
+                ok.select(d[1], 0.0),
+                ok.select(d[2], 1.0),
+            ]
+        };
+        let (di, d_o) = (raw(wi, ok_i), raw(wo, ok_o));
+        let inv = |d: Vec3<'a>| 1.0 / (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let (inv_i, inv_o) = (inv(di), inv(d_o));
+        let sums: Vec3 = std::array::from_fn(|c| di[c] + d_o[c]);
+        let diffs: Vec3 = std::array::from_fn(|c| di[c] - d_o[c]);
+        let len2_diff = sums[0] * diffs[0] + sums[1] * diffs[1] + sums[2] * diffs[2];
+        let inv_io = inv_i * inv_o;
+        let half_delta = -(len2_diff * inv_io * inv_io) / ((inv_i + inv_o) * 2.0);
+        let inv_mean = (inv_i + inv_o) * 0.5;
+        let minus = |c: usize| -(sums[c].fma(inv_mean, diffs[c] * half_delta));
+        let (u, v, w) = (minus(0), minus(1), minus(2));
+        let (wi, wo) = (wi_unit, wo_unit);
         let one_plus_dot = (u * u + v * v + w * w) * 0.5;
         let geometric_factor = one_plus_dot * one_plus_dot / (wi[2] * wo[2]);
         let cos_half = (one_plus_dot * 0.5).max(0.0).sqrt();

@@ -77,6 +77,9 @@ pub struct Gaussian {
     /// Sampling strategies over the incidence cosine and the wavelength,
     /// made on the first sample.
     strategies: OnceLock<StrategyTable<Lobe>>,
+    /// The RGB program's table (`program.rs`), built on the first export
+    /// of the RGB eval program.
+    rgb_program: OnceLock<Option<program::RgbProgramTable>>,
 }
 
 impl Gaussian {
@@ -96,6 +99,7 @@ impl Gaussian {
             rgb_table: OnceLock::new(),
             albedo: OnceLock::new(),
             strategies: OnceLock::new(),
+            rgb_program: OnceLock::new(),
         }
     }
 
@@ -162,6 +166,11 @@ impl SurfaceModel for Gaussian {
             + self.strategies.get().map_or(0, |t| t.memory_bytes())
             + self
                 .rgb_table
+                .get()
+                .and_then(|t| t.as_ref())
+                .map_or(0, |t| t.memory_bytes())
+            + self
+                .rgb_program
                 .get()
                 .and_then(|t| t.as_ref())
                 .map_or(0, |t| t.memory_bytes())

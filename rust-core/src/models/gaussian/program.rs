@@ -1,7 +1,853 @@
 //! The gaussian model's programs for tracing renderers (crate::program,
 //! docs/jit.md): the same physics as its native path, as array operations.
+//!
+//! - Spectral kernel: S(g, x) from the universal table (`series.rs`, the
+//!   same B-spline coefficients and the same lookup), below its g range the
+//!   first four terms of the series, above it the Poisson expectation
+//!   expanded to O(1/g^2); beyond its rho range S is below e^-270 of its
+//!   peak and the program gives 0.
+//! - RGB: a per-material table over the pair variables (ln g0, rho0) of
+//!   `rgb.rs` (g0 = (sigma w)^2, x0 = (Tx^2 u^2 + Ty^2 v^2) / 4: every node
+//!   of the rule is a function of these two), sampled from the same series
+//!   values as the native node table and extended down to both-grazing
+//!   pairs. Where the Fresnel-weighted rule allows it (a wavelength-flat
+//!   Fresnel term, or an isotropic surface, whose half-vector cosine is a
+//!   function of (g0, x0)), each grid point holds the rule's sum itself,
+//!   as ln N (N = sum_j K_j m_j, m_j > 0) and the three channels over N:
+//!   one lookup of 4 values serves every node (64 gathers). Anisotropic
+//!   surfaces with a metal's Fresnel keep ln(k_j^2 S_j) of every node (the
+//!   native node table's layout) and the Fresnel-weighted rule
+//!   (`RgbRule::integrate_program`).
+//! - Coherent lobe: F^2 e^-g as native, RGB by the rule at the nodes.
+//! - Sampling: a defensive mixture (cosine and uniform) with a lobe of
+//!   half-vector slopes: for g0 (the roughness exponent at the mirror
+//!   direction) below `SERIES_MAX_G`, the series' own mixture of Gaussians
+//!   (term m ~ Poisson(g0 | m >= 1), slope variance alpha^2 m / (2 g0) per
+//!   axis: the diffraction lobe of smooth surfaces), whose density is one
+//!   evaluation of S; above it the Beckmann asymptote (alpha = 2 sigma / T
+//!   per axis). Slopes are reflected about their normal, so the lobe lives
+//!   in solid angle and stays finite at the horizon. The coherent
+//!   probability follows the model's own albedo table (isotropic surfaces)
+//!   as native.
 
-use super::Gaussian;
-use crate::models::SurfacePrograms;
+use super::rgb::{column_limits, node_samples, D_U, D_V, MAP_R};
+use super::sampling::{AlbedoTable, BECKMANN_MIN_G};
+use super::series::{prefilter_2d, series_table_export, SeriesTableExport, SPLINE_MARGIN};
+use super::{Gaussian, GaussianSurface, COHERENT_MAX_G};
+use crate::models::{RgbRule, SampleProgram, Shading, SurfacePrograms};
+use crate::optics::fresnel::Fresnel;
+use crate::optics::geometry::MIN_COS;
+use crate::optics::program::{PairProgram, Vec3};
+use crate::program::lookup::bspline_weights;
+use crate::program::{Builder, Mask, Table, Value};
+use crate::sampling::program::{cosine_density_program, cosine_direction_program};
+use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM};
+use std::f64::consts::PI;
 
-impl SurfacePrograms for Gaussian {}
+/// g at the bluest node of the RGB program table's lowest row: below it the
+/// first term of the series carries all but ~g e^(x/2) / 4 of S (5e-6 at
+/// S = e^-12 of its peak), so the rows below repeat the lowest one (ln(S /
+/// g0) constant).
+const RGB_G_LO: f64 = 2e-8;
+/// Columns of the RGB program table reach where ln S of every node is below
+/// this: beyond it f is below f32's range whatever G and 1/w^2 are.
+const RGB_CUT: f64 = -250.0;
+/// Largest RGB program table (bytes).
+const RGB_MAX_BYTES: usize = 8 << 20;
+/// Mirror roughness exponent below which the sampling lobe is the series'
+/// mixture (above: Beckmann).
+pub const SERIES_MAX_G: f64 = 12.0;
+/// Poisson terms the series lobe's inversion unrolls: P(m > 48 | g0 < 12)
+/// is below 1e-13.
+const SERIES_TERMS: usize = 48;
+/// The wavelength of the RGB strategy's lobe (nm).
+pub const RGB_SAMPLING_NM: f64 = 550.0;
+/// Share of the lobe probability of the lobe frozen at the mirror (the
+/// rest: the fitted lobe).
+const MIRROR_LOBE: f64 = 0.3;
+/// Share of the non-coherent probability of the defensive part (half
+/// cosine, half uniform), as the core's strategies.
+const DEFENSIVE: f64 = crate::sampling::DEFENSIVE_FRACTION;
+
+/// The universal table of ln S as a program table.
+struct SeriesLookup {
+    table: Table,
+    e: SeriesTableExport,
+}
+
+impl SeriesLookup {
+    fn new(b: &Builder) -> SeriesLookup {
+        let e = series_table_export();
+        SeriesLookup {
+            table: b.table(e.coefficients.to_vec()),
+            e,
+        }
+    }
+}
+
+/// The bicubic B-spline sums of `count` interleaved values per grid point:
+/// value l is sum_ab wu_a wv_b table[base + a row_len + b stride + l].
+#[allow(clippy::too_many_arguments)]
+fn bicubic<'a>(
+    b: &'a Builder,
+    table: Table,
+    base: Value<'a>,
+    row_len: usize,
+    stride: usize,
+    count: usize,
+    wu: [Value<'a>; 4],
+    wv: [Value<'a>; 4],
+) -> Vec<Value<'a>> {
+    (0..count)
+        .map(|l| {
+            let row = |a: usize| {
+                let at = |c: usize| b.gather(table, base + (a * row_len + c * stride + l) as f64);
+                let mut acc = at(0) * wv[0];
+                for (c, &w) in wv.iter().enumerate().skip(1) {
+                    acc = at(c).fma(w, acc);
+                }
+                acc
+            };
+            let mut acc = row(0) * wu[0];
+            for (a, &w) in wu.iter().enumerate().skip(1) {
+                acc = row(a).fma(w, acc);
+            }
+            acc
+        })
+        .collect()
+}
+
+/// S(g, x) as `poisson_series` gives it: the universal table where it
+/// covers (g, rho); the first four terms below its g range (the fifth is
+/// below 1e-5 of the first wherever S is above e^-25 of its peak); the
+/// Poisson expectation to O(1/g^2) above it (g >= 1e4: the next term is
+/// ~y^6 / (48 g^3), 1e-7 at y = x / g = 14); 0 beyond its rho range (S
+/// below e^-270 of its peak). `ln_g` is ln g (computed by the caller
+/// without forming g where g may underflow).
+fn series<'a>(
+    b: &'a Builder,
+    lk: &SeriesLookup,
+    g: Value<'a>,
+    ln_g: Value<'a>,
+    x: Value<'a>,
+) -> Value<'a> {
+    let e = &lk.e;
+    // The table: the native lookup.
+    let rho = (x / (g + 1.0)).sqrt();
+    let fg = (ln_g - e.ln_g_min) * (1.0 / e.d_ln_g) + 1.0;
+    let fx = rho * (1.0 / e.d_rho) + 1.0;
+    let ig = fg.floor().clamp(1.0, (e.n_g - 3) as f64);
+    let ix = fx.floor().clamp(1.0, (e.n_rho - 3) as f64);
+    let wg = bspline_weights(fg - ig);
+    let wx = bspline_weights(fx - ix);
+    let base = (ig - 1.0) * e.n_rho as f64 + (ix - 1.0);
+    let ln_table = bicubic(b, lk.table, base, e.n_rho, 1, 1, wg, wx)[0];
+    let in_table = g.ge(e.g_min) & g.lt(e.g_max) & rho.lt(e.rho_max);
+    // Small g: sum_{m=1..4} e^-g g^m / m! e^(-x/m) / m, with e^(-x/m) as
+    // powers of q = e^(-x/12), divided by g.
+    let q = (x * (-1.0 / 12.0)).exp();
+    let q3 = q * q * q;
+    let q4 = q3 * q;
+    let q6 = q3 * q3;
+    let q12 = q6 * q6;
+    let terms = q12 + g * (q6 * 0.25 + g * (q4 * (1.0 / 18.0) + g * (q3 * (1.0 / 96.0))));
+    let s_over_g = (1.0 - g + g * g * 0.5) * terms;
+    // Large g: (1/g) e^-y (1 + c1 / g + c2 / g^2).
+    let inv = 1.0 / g;
+    let y = x * inv;
+    let c1 = (y * y - y * 4.0 + 2.0) * 0.5;
+    let c2 = (((y * 0.125 - 11.0 / 6.0) * y + 7.5) * y - 9.0) * y + 2.0;
+    let corr = ((c1 + c2 * inv) * inv).clamp(-0.5, 0.5);
+    let ln_large = corr * (1.0 - corr * (0.5 - corr * (1.0 / 3.0))) - y - ln_g;
+    let ln_s = in_table.select(ln_table, g.ge(e.g_max).select(ln_large, -1e4));
+    g.lt(e.g_min).select(g * s_over_g, ln_s.exp())
+}
+
+/// expm1(g) for g >= 0 (f32's exp(g) - 1 loses the digits of small g).
+fn expm1<'a>(g: Value<'a>) -> Value<'a> {
+    let series = g
+        * (1.0
+            + g * (0.5
+                + g * (1.0 / 6.0
+                    + g * (1.0 / 24.0
+                        + g * (1.0 / 120.0 + g * (1.0 / 720.0 + g * (1.0 / 5040.0)))))));
+    g.lt(0.5).select(series, g.exp() - 1.0)
+}
+
+/// The RGB program's per-material table (see the module documentation).
+pub(crate) struct RgbProgramTable {
+    /// Values per grid point: 4 (ln N - ln g0 and the three channels over
+    /// N) or one per node (ln(k_j^2 S_j) - ln g0).
+    values: usize,
+    /// Channels hold the Fresnel-weighted rule (else the plain weights, to
+    /// be multiplied by F^2 at the pair's cosine); unused per node.
+    folded: bool,
+    /// B0 of the folded channels: the program adds `cone_term`(cos_h) B0.
+    cos_slope: [f64; 3],
+    ln_g0_lo: f64,
+    rows: usize,
+    cols: usize,
+    inv_k_ref2: f64,
+    row_len: usize,
+    coef: Vec<f32>,
+}
+
+impl RgbProgramTable {
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<RgbProgramTable>() + self.coef.len() * 4
+    }
+
+    /// The table of `surface` for `rule` and `fresnel`; `per_node` forces the
+    /// per-node layout (tests). None when the rule is empty or the table
+    /// would not fit RGB_MAX_BYTES.
+    fn build(
+        surface: &GaussianSurface,
+        rule: &RgbRule,
+        fresnel: &Fresnel,
+        per_node: bool,
+    ) -> Option<RgbProgramTable> {
+        let n = rule.len();
+        let k = &rule.k_per_um;
+        let sigma = surface.sigma_um;
+        if n == 0 || !(sigma > 0.0 && surface.corr_x_um > 0.0 && surface.corr_y_um > 0.0) {
+            return None;
+        }
+        let k_min = k.iter().cloned().fold(f64::INFINITY, f64::min);
+        let k_max = k.iter().cloned().fold(0.0, f64::max);
+        let k_ref2 = k_min * k_max;
+        let combined = !per_node && (fresnel.is_spectrally_flat() || surface.isotropic);
+        let values = if combined { 4 } else { n };
+        // |w| <= 2, so g0 <= 4 sigma^2; down to g = RGB_G_LO at the bluest
+        // node, and at least 8 rows.
+        let ln_g0_hi = (4.0 * sigma * sigma).ln();
+        let ln_g0_lo = (RGB_G_LO / (k_max * k_max)).ln().min(ln_g0_hi - 8.0 * D_U);
+        let rows = ((ln_g0_hi - ln_g0_lo) / D_U).ceil() as usize + 2;
+        let limits = column_limits(surface, k, ln_g0_lo, rows, k_ref2, RGB_CUT);
+        let v_max = limits.iter().cloned().fold(0.0, f64::max);
+        let cols = (v_max.ceil() as usize + 2).max(4);
+        if 4 * values * (rows + 2) * (cols + 2) > RGB_MAX_BYTES {
+            return None;
+        }
+        let samples = node_samples(surface, k, ln_g0_lo, rows, cols, k_ref2, n);
+        let m = SPLINE_MARGIN;
+        let (ext_rows, ext_cols) = (rows + 2 * m, cols + 2 * m);
+        let mut grid = vec![0.0; ext_rows * ext_cols * values];
+        // The plain rule (F = 1) and the positive node weights of N.
+        let plain = RgbRule::new(n, &Fresnel::Constant(1.0));
+        let one = Fresnel::Constant(1.0);
+        let ln_m: Vec<f64> = (0..n)
+            .map(|j| {
+                let mut e = vec![0.0; n];
+                e[j] = 1.0;
+                let w = plain.integrate(&one, 1.0, &e);
+                (w[0].abs() + w[1].abs() + w[2].abs()).max(1e-12).ln()
+            })
+            .collect();
+        let folded = combined && !fresnel.is_spectrally_flat();
+        // The folded weights are linear in cos near 0, and cos_h = sqrt(x0 /
+        // T^2 + g0 / (4 sigma^2)) has a cone's point at the grid's bottom
+        // left (both directions grazing, near the mirror), which a spline
+        // cannot follow: the table holds the channels less `cone_term`(cos_h)
+        // B0, the program adds it back. B0 is the weights' slope at cos 0 for
+        // the spectrum there (g << 1, x0 -> 0: K_j ~ k_j^4), so what is left
+        // is even in cos_h near the point (up to a cos^3 term).
+        let cos_slope = if folded {
+            let ln_n0 = k
+                .iter()
+                .zip(&ln_m)
+                .map(|(k, w)| (4.0 * k.ln() + w).exp())
+                .sum::<f64>()
+                .ln();
+            let rel0: Vec<f64> = k.iter().map(|k| (4.0 * k.ln() - ln_n0).exp()).collect();
+            let (at0, at1) = (
+                rule.integrate(fresnel, 0.0, &rel0),
+                rule.integrate(fresnel, 1.0 / 256.0, &rel0),
+            );
+            std::array::from_fn(|c| (at1[c] - at0[c]) * 256.0)
+        } else {
+            [0.0; 3]
+        };
+        let (t2, sigma2) = (surface.corr_x_um * surface.corr_x_um, sigma * sigma);
+        let mut rel = vec![0.0; n];
+        for r in 0..ext_rows {
+            let ln_g0 = ln_g0_lo + (r as f64 - m as f64) * D_U;
+            let g0 = ln_g0.exp();
+            for c in 0..ext_cols {
+                let point = &samples[(r * ext_cols + c) * n..][..n];
+                let out = &mut grid[(r * ext_cols + c) * values..][..values];
+                if !combined {
+                    for (o, &l) in out.iter_mut().zip(point) {
+                        *o = l - ln_g0;
+                    }
+                    continue;
+                }
+                let top = point
+                    .iter()
+                    .zip(&ln_m)
+                    .map(|(l, w)| l + w)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let total: f64 = point
+                    .iter()
+                    .zip(&ln_m)
+                    .map(|(l, w)| (l + w - top).exp())
+                    .sum();
+                let ln_n = top + total.ln();
+                for (o, &l) in rel.iter_mut().zip(point) {
+                    *o = (l - ln_n).exp();
+                }
+                let rgb = if folded {
+                    // cos_h^2 = (u^2 + v^2 + w^2) / 4 = x0 / T^2 + g0 / (4
+                    // sigma^2); beyond 1 (outside the pairs, inside the
+                    // splines' reach) the weights continue linearly.
+                    let vv = (c as f64 - m as f64).abs() * D_V;
+                    let x0 = rho2_at(vv) * (1.0 / k_ref2 + g0);
+                    let cos = (x0 / t2 + g0 / (4.0 * sigma2)).sqrt();
+                    let cone = cone_term(cos);
+                    // Past 1 (outside the pairs, inside the splines'
+                    // reach) the weights continue as w(1 - d) + 2 d w'(1),
+                    // which keeps their first two derivatives at 1 (a kink
+                    // or a jump of curvature there costs 1e-3 at the rows
+                    // of w ~ 2), with d saturating smoothly below 0.5.
+                    let folded: [f64; 3] = if cos <= 1.0 {
+                        rule.integrate(fresnel, cos, &rel)
+                    } else {
+                        let d = 0.5 * ((cos - 1.0) / 0.5).tanh();
+                        let h = 1.0 / 256.0;
+                        let at = |c: f64| rule.integrate(fresnel, c, &rel);
+                        let (w0, w1, w2) = (at(1.0), at(1.0 - h), at(1.0 - 2.0 * h));
+                        let back = at(1.0 - d);
+                        let slope: [f64; 3] = std::array::from_fn(|i| {
+                            (3.0 * w0[i] - 4.0 * w1[i] + w2[i]) / (2.0 * h)
+                        });
+                        std::array::from_fn(|i| back[i] + 2.0 * d * slope[i])
+                    };
+                    std::array::from_fn(|i| folded[i] - cone * cos_slope[i])
+                } else {
+                    plain.integrate(&one, 1.0, &rel)
+                };
+                out[0] = ln_n - ln_g0;
+                out[1..].copy_from_slice(&rgb);
+            }
+        }
+        prefilter_2d(&mut grid, ext_rows, ext_cols, values);
+        // One coefficient beyond each end of the rows and columns.
+        let row_len = (cols + 2) * values;
+        let mut coef = Vec::with_capacity((rows + 2) * row_len);
+        for r in m - 1..m + rows + 1 {
+            let src = &grid[(r * ext_cols + m - 1) * values..][..row_len];
+            coef.extend(src.iter().map(|&v| v as f32));
+        }
+        Some(RgbProgramTable {
+            values,
+            folded,
+            cos_slope,
+            ln_g0_lo,
+            rows,
+            cols,
+            inv_k_ref2: 1.0 / k_ref2,
+            row_len,
+            coef,
+        })
+    }
+}
+
+/// cos e^(-4 cos^2): cos near the cone's point (cos = 0), nothing at the
+/// rows of w ~ 2 (whose neighbours beyond cos = 1 only the table's splines
+/// see), smooth everywhere.
+fn cone_term(cos: f64) -> f64 {
+    cos * (-4.0 * cos * cos).exp()
+}
+
+/// rho0^2 at column coordinate vv = v D_V (`rgb.rs`'s map, inverted).
+fn rho2_at(vv: f64) -> f64 {
+    let v4 = vv * vv * vv * vv;
+    let a = v4 / (MAP_R * MAP_R);
+    0.5 * (a + (a * a + 4.0 * v4).sqrt())
+}
+
+/// The sampling strategy's parameters at one wi and wavelength.
+struct Strategy<'a> {
+    /// Coherent probability.
+    p_coh: Value<'a>,
+    /// The lobes are the series' mixtures (else Beckmann).
+    series: Mask<'a>,
+    g0: Value<'a>,
+    /// E[m | m >= 1] (1 for Beckmann).
+    m_mean: Value<'a>,
+    /// The fitted lobe and the lobe frozen at the mirror, and the
+    /// probability of the second.
+    lobes: [SlopeLobe<'a>; 2],
+    mix: Value<'a>,
+}
+
+/// A lobe in slope space: its centre, the precision matrix of its base
+/// Gaussian (xx, xy, yy) and the Cholesky factor of its covariance (l11,
+/// l21, l22). The series' term m has the covariance m / m_mean times the
+/// base's, Beckmann the base's.
+struct SlopeLobe<'a> {
+    centre: [Value<'a>; 2],
+    precision: [Value<'a>; 3],
+    chol: [Value<'a>; 3],
+}
+
+impl<'a> SlopeLobe<'a> {
+    fn new(centre: [Value<'a>; 2], precision: [Value<'a>; 3]) -> SlopeLobe<'a> {
+        let [pxx, pxy, pyy] = precision;
+        let inv_det = 1.0 / (pxx * pyy - pxy * pxy);
+        let (sxx, sxy, syy) = (pyy * inv_det, -pxy * inv_det, pxx * inv_det);
+        let l11 = sxx.sqrt();
+        let l21 = sxy / l11;
+        let l22 = (syy - l21 * l21).max(0.0).sqrt();
+        SlopeLobe {
+            centre,
+            precision,
+            chol: [l11, l21, l22],
+        }
+    }
+}
+
+impl Gaussian {
+    /// The RGB program's table, built on first use.
+    fn rgb_program_table(&self, shading: &Shading) -> Option<&RgbProgramTable> {
+        self.rgb_program
+            .get_or_init(|| {
+                RgbProgramTable::build(&self.surface, shading.rgb_rule, shading.fresnel, false)
+            })
+            .as_ref()
+    }
+
+    /// The coherent probability at unit wi (above the horizon) and
+    /// wavelength lambda: the coherent lobe's share of the albedo
+    /// (`build_component`): e^-g0, or for isotropic surfaces below the
+    /// Beckmann regime e^-g0 / (e^-g0 + D) with D the model's tabulated
+    /// diffuse albedo.
+    fn coherent_probability<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        cos_i: Value<'a>,
+        lambda: Value<'a>,
+    ) -> Value<'a> {
+        let s = &self.surface;
+        let a = (2000.0 * PI * 2.0 * s.sigma_um) / lambda * cos_i;
+        let g0 = a * a;
+        let mut p_coh = g0.gt(COHERENT_MAX_G).select(0.0, (-g0).exp());
+        if s.isotropic {
+            let table = self
+                .albedo
+                .get_or_init(|| AlbedoTable::build(self, shading));
+            let d = table.program(b, cos_i, lambda);
+            let usable = d.gt(0.0) & d.finite() & g0.lt(BECKMANN_MIN_G) & p_coh.gt(0.0);
+            p_coh = usable.select(p_coh / (p_coh + d), p_coh);
+        }
+        p_coh
+    }
+
+    /// The strategy at unit wi (above the horizon) for the wavelength
+    /// `lambda_nm`; RGB (None): the lobe at RGB_SAMPLING_NM, the coherent
+    /// probability the mean over the RGB band (as the core's RGB
+    /// strategy).
+    fn strategy_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        wi: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+    ) -> Strategy<'a> {
+        let s = &self.surface;
+        let p_coh = match lambda_nm {
+            Some(lambda) => self.coherent_probability(b, shading, wi[2], lambda),
+            None => {
+                // The core averages its four RGB sampling wavelengths; the
+                // probability is smooth in lambda: two midpoints serve.
+                let n = crate::sampling::rgb_sampling_nodes();
+                let (lo, hi) = (0.5 * (n[0] + n[1]), 0.5 * (n[2] + n[3]));
+                (self.coherent_probability(b, shading, wi[2], b.c(lo))
+                    + self.coherent_probability(b, shading, wi[2], b.c(hi)))
+                    * 0.5
+            }
+        };
+        let lambda = lambda_nm.unwrap_or_else(|| b.c(RGB_SAMPLING_NM));
+        let k = (2000.0 * PI) / lambda;
+        let a = k * (2.0 * s.sigma_um) * wi[2];
+        let g0 = a * a;
+        let series = g0.lt(SERIES_MAX_G);
+        let (lobes, m_mean) = self.slope_lobes(b, wi, k, g0, series);
+        Strategy {
+            p_coh,
+            series,
+            g0,
+            m_mean,
+            lobes,
+            mix: b.c(MIRROR_LOBE),
+        }
+    }
+
+    /// The two lobes in slope space (s = -h_xy / h_z of the half vector h)
+    /// and E[m | m >= 1].
+    ///
+    /// Beckmann (g0 >= SERIES_MAX_G): both centred at 0, slopes' variances
+    /// alpha^2 / 2 per axis (alpha = 2 sigma / T). The series: f cos per
+    /// unit slope area is, per term m, ~ w^p (1 + s^2) e^(-x / m) (the w^3
+    /// of the half-vector map and of G, and S ~ g^e with e = d ln S / d ln
+    /// g, p = 3 + 2 e: 5 for smooth surfaces), with w = cos_i + cos_o and x
+    /// = k^2 w^2 (Tx^2 sx^2 + Ty^2 sy^2) / 4: near normal incidence a
+    /// Gaussian around s = 0 of variances 2 m / (k T w0)^2 (the lobe frozen
+    /// at the mirror, w0 = 2 cos_i), but towards grazing incidence w grows
+    /// several-fold inwards across the lobe, which moves its mass away from
+    /// the mirror direction and narrows it. The fitted lobe is the Laplace
+    /// fit of the mean term: its mode along the plane of incidence by
+    /// Newton's method, the precision the curvature there. The law is skewed
+    /// (heavier towards the mirror), so the mixture keeps MIRROR_LOBE of the
+    /// frozen lobe (measured, sampling_report: smooth surface at cos_i 0.08,
+    /// 2.6x the core's variance against 29x with the frozen lobe alone).
+    fn slope_lobes<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        k: Value<'a>,
+        g0: Value<'a>,
+        series: Mask<'a>,
+    ) -> ([SlopeLobe<'a>; 2], Value<'a>) {
+        let s = &self.surface;
+        let (tx2, ty2) = (s.corr_x_um * s.corr_x_um, s.corr_y_um * s.corr_y_um);
+        let m_mean = series.select(g0 * g0.exp() / expm1(g0), 1.0);
+        let e = 2.0 / (g0 * 0.79 + 1.0) - 1.0;
+        let p = e * 2.0 + 3.0;
+        // The plane of incidence: d along wi_xy (s = -a d + y d_perp).
+        let (c, sin_i) = (wi[2], (wi[0] * wi[0] + wi[1] * wi[1]).sqrt());
+        let flat = sin_i.gt(1e-6);
+        let inv_sin = 1.0 / sin_i.max(1e-6);
+        let dx = flat.select(wi[0] * inv_sin, 1.0);
+        let dy = flat.select(wi[1] * inv_sin, 0.0);
+        let q = k * k * 0.25 / m_mean;
+        let kappa_a = q * (dx * dx * tx2 + dy * dy * ty2);
+        let kappa_y = q * (dy * dy * tx2 + dx * dx * ty2);
+        let kappa_c = q * (dx * dy * (tx2 - ty2));
+        // phi(a) = p ln w + ln D - kappa_a w^2 a^2 along the plane, with w =
+        // 2 N / D, N = c + sin_i a, D = 1 + a^2; y = w a = 2 P / D, P = N a.
+        let derivatives = |a: Value<'a>| {
+            let n = c + sin_i * a;
+            let d = a * a + 1.0;
+            let inv_d = 1.0 / d;
+            let pp = n * a;
+            let p1 = c + sin_i * a * 2.0;
+            let num1 = p1 * d - a * pp * 2.0;
+            let y = pp * inv_d * 2.0;
+            let y1 = num1 * inv_d * inv_d * 2.0;
+            let y2 = ((sin_i * d - pp) * 2.0 * inv_d * inv_d
+                - num1 * a * 4.0 * inv_d * inv_d * inv_d)
+                * 2.0;
+            let lw1 = sin_i / n - a * inv_d * 2.0;
+            let one_a2 = (1.0 - a * a) * 2.0 * inv_d * inv_d;
+            let lw2 = -(sin_i * sin_i) / (n * n) - one_a2;
+            let d1 = p * lw1 + a * inv_d * 2.0 - kappa_a * y * y1 * 2.0;
+            let d2 = p * lw2 + one_a2 - kappa_a * (y1 * y1 + y * y2) * 2.0;
+            (d1, d2, n, d, lw1)
+        };
+        // From the mode of p ln(c + a) - 4 kappa_a (c + a)^2 a^2 with c -> 0
+        // (the grazing limit), three steps converge (checked on a model of
+        // the law from cos_i 0.001 to 0.9; from a = 0 the most grazing need
+        // 30).
+        let mut a = ((p / (kappa_a * 8.0)).sqrt().sqrt() - c).max(0.0);
+        for _ in 0..3 {
+            let (d1, d2, ..) = derivatives(a);
+            a = (a - d1 / d2.min(-1e-6)).clamp(0.0, 10.0);
+        }
+        let (_, d2, n, d, lw1) = derivatives(a);
+        let w = n / d * 2.0;
+        let w2 = w * w;
+        // Precision in the (a, y) frame.
+        let p_aa = (-d2).max(1e-6);
+        let p_yy =
+            ((p - 1.0) * 2.0 / d + kappa_y * w2 * 2.0 - kappa_a * w2 * a * a * 4.0 / d).max(1e-6);
+        let p_ay = kappa_c * (w2 + a * w2 * lw1 * 2.0) * 2.0;
+        let p_ay = p_ay.clamp(-(p_aa * p_yy).sqrt() * 0.95, (p_aa * p_yy).sqrt() * 0.95);
+        let (ea, ey) = ([-dx, -dy], [-dy, dx]);
+        let fit = |i: usize, j: usize| {
+            p_aa * ea[i] * ea[j] + p_yy * ey[i] * ey[j] + p_ay * (ea[i] * ey[j] + ey[i] * ea[j])
+        };
+        // The lobe frozen at the mirror (w = 2 cos_i, centre 0).
+        let w0 = c * 2.0;
+        let frozen = [
+            q * w0 * w0 * (2.0 * tx2),
+            b.c(0.0),
+            q * w0 * w0 * (2.0 * ty2),
+        ];
+        // The fitted lobe is the frozen one while the mode is within half
+        // an sd of the mirror, the Laplace fit from 2 sds on, linear between.
+        let r = a * p_aa.sqrt();
+        let beta = ((r - 0.5) * (1.0 / 1.5)).clamp(0.0, 1.0);
+        let laplace: [Value; 3] = std::array::from_fn(|i| {
+            let (ii, jj) = [(0, 0), (0, 1), (1, 1)][i];
+            fit(ii, jj) * beta + frozen[i] * (1.0 - beta)
+        });
+        let beckmann = [
+            b.c(2.0 * tx2 / (4.0 * s.sigma_um * s.sigma_um)),
+            b.c(0.0),
+            b.c(2.0 * ty2 / (4.0 * s.sigma_um * s.sigma_um)),
+        ];
+        let fitted = std::array::from_fn(|i| series.select(laplace[i], beckmann[i]));
+        let mirror = std::array::from_fn(|i| series.select(frozen[i], beckmann[i]));
+        let shift = a * beta;
+        let centre = [
+            series.select(shift * -dx, 0.0),
+            series.select(shift * -dy, 0.0),
+        ];
+        let zero = [b.c(0.0), b.c(0.0)];
+        (
+            [SlopeLobe::new(centre, fitted), SlopeLobe::new(zero, mirror)],
+            m_mean,
+        )
+    }
+
+    /// The lobes' solid-angle density at unit wo (both above the horizon).
+    fn lobe_pdf<'a>(
+        &self,
+        b: &'a Builder,
+        st: &Strategy<'a>,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+    ) -> Value<'a> {
+        let h: Vec3 = std::array::from_fn(|i| wi[i] + wo[i]);
+        let len = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+        let hz = h[2] / len;
+        let cos_ih = (wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]) / len;
+        // Slopes (the sampler's h = (-sx, -sy, 1) / |.|).
+        let (sx, sy) = (-h[0] / h[2], -h[1] / h[2]);
+        let lk = SeriesLookup::new(b);
+        let g0 = st.g0;
+        let ln_g0 = g0.ln();
+        let series_norm = st.m_mean * g0.exp() / expm1(g0);
+        // Beckmann: the Gaussian; the series: sum_m P(m | m >= 1) of the
+        // Gaussians of covariance m / m_mean times the base's, = m_mean
+        // e^g0 / expm1(g0) S(g0, quad m_mean / 2) times the base's norm.
+        let density = |lobe: &SlopeLobe<'a>| {
+            let (dx, dy) = (sx - lobe.centre[0], sy - lobe.centre[1]);
+            let [pxx, pxy, pyy] = lobe.precision;
+            let quad = pxx * dx * dx + pxy * dx * dy * 2.0 + pyy * dy * dy;
+            let norm = (pxx * pyy - pxy * pxy).max(0.0).sqrt() * (0.5 / PI);
+            let x = quad * st.m_mean * 0.5;
+            let series_density = series(b, &lk, g0, ln_g0, x) * series_norm;
+            norm * st.series.select(series_density, (quad * -0.5).exp())
+        };
+        let p_slope = density(&st.lobes[0]) * (1.0 - st.mix) + density(&st.lobes[1]) * st.mix;
+        let pdf = p_slope / (hz * hz * hz * cos_ih * 4.0);
+        (hz.gt(0.0) & cos_ih.gt(0.0)).select(pdf, 0.0)
+    }
+}
+
+/// A uniform number usable as such: finite, in [0, 1).
+fn uniform(u: Value) -> Value {
+    u.finite().select(u, 0.0).clamp(0.0, 1.0 - 1e-7)
+}
+
+impl SurfacePrograms for Gaussian {
+    fn kernel_program<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        k_per_um: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let s = &self.surface;
+        let lk = SeriesLookup::new(b);
+        let a = (k_per_um * s.sigma_um * pair.w).abs();
+        let g = a * a;
+        let ln_g = a.ln() * 2.0;
+        let (qx, qy) = (
+            0.25 * s.corr_x_um * s.corr_x_um,
+            0.25 * s.corr_y_um * s.corr_y_um,
+        );
+        let x = k_per_um * k_per_um * (pair.u * pair.u * qx + pair.v * pair.v * qy);
+        let series = series(b, &lk, g, ln_g, x);
+        let prefactor =
+            k_per_um * k_per_um * (s.corr_x_um * s.corr_y_um / (4.0 * PI)) / (pair.w * pair.w);
+        Some(prefactor * series)
+    }
+
+    fn reflectance_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        pair: &PairProgram<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        let t = self.rgb_program_table(shading)?;
+        Some(rgb_from_table(b, t, &self.surface, shading, pair))
+    }
+
+    fn coherent_spectral_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        cos_i: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let k = (2000.0 * PI) / lambda_nm;
+        let a = k * (2.0 * self.surface.sigma_um) * cos_i;
+        let g = a * a;
+        let r = shading.fresnel.program(b, cos_i, lambda_nm) * (-g).exp();
+        Some(g.gt(COHERENT_MAX_G).select(0.0, r))
+    }
+
+    fn coherent_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        cos_i: Value<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        let rule = shading.rgb_rule;
+        let c2 = cos_i * cos_i * (4.0 * self.surface.sigma_um * self.surface.sigma_um);
+        let values: Vec<Value> = rule
+            .k_per_um
+            .iter()
+            .map(|&k| (c2 * (-k * k)).exp())
+            .collect();
+        let rgb = rule.integrate_program(b, shading.fresnel, cos_i, &values);
+        let k_red = wavenumber_per_um(LAMBDA_MAX_NM);
+        let gone = (c2 * (k_red * k_red)).gt(COHERENT_MAX_G);
+        Some(rgb.map(|c| gone.select(0.0, c)))
+    }
+
+    fn coherent_probability_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        wi: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        Some(self.strategy_program(b, shading, wi, lambda_nm).p_coh)
+    }
+
+    fn sample_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        wi: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+        u: [Value<'a>; 3],
+    ) -> Option<SampleProgram<'a>> {
+        let st = self.strategy_program(b, shading, wi, lambda_nm);
+        let [u0, u1, u2] = u.map(uniform);
+        // u0 picks the coherent lobe, then the defensive part (cosine or
+        // uniform), then the lobe and, remapped, its term.
+        let coherent = u0.lt(st.p_coh);
+        let rest = (1.0 - st.p_coh).max(1e-30);
+        let t = ((u0 - st.p_coh) / rest).clamp(0.0, 1.0 - 1e-7);
+        let defensive = t.lt(DEFENSIVE);
+        let cosine = t.lt(0.5 * DEFENSIVE);
+        let t_lobe = ((t - DEFENSIVE) * (1.0 / (1.0 - DEFENSIVE))).clamp(0.0, 1.0 - 1e-7);
+        // The first `mix` of it picks the mirror lobe, then the term.
+        let mirror_lobe = t_lobe.lt(st.mix);
+        let t_lobe = mirror_lobe
+            .select(t_lobe / st.mix, (t_lobe - st.mix) / (1.0 - st.mix))
+            .clamp(0.0, 1.0 - 1e-7);
+        // The term m ~ Poisson(g0 | m >= 1) by inversion from m = 1.
+        let g0 = st.g0;
+        // P(m = 1 | m >= 1) = g0 / (e^g0 - 1); P(m) = P(m - 1) g0 / m.
+        let mut p = st.series.select(g0 / expm1(g0), 0.0);
+        let mut acc = p;
+        let mut m = b.c(1.0);
+        for i in 2..=SERIES_TERMS {
+            p = p * g0 * (1.0 / i as f64);
+            m = t_lobe.ge(acc).select(i as f64, m);
+            acc = acc + p;
+        }
+        let spread = st.series.select((m / st.m_mean).sqrt(), 1.0);
+        // Box-Muller: two normals from u1, u2, then the lobe's Gaussian.
+        let r = (-(1.0 - u1).ln()).sqrt() * std::f64::consts::SQRT_2 * spread;
+        let phi = u2 * (2.0 * PI);
+        let (n1, n2) = (r * phi.cos(), r * phi.sin());
+        let pick = |i: usize| mirror_lobe.select(st.lobes[1].chol[i], st.lobes[0].chol[i]);
+        let (l11, l21, l22) = (pick(0), pick(1), pick(2));
+        let centre = |i: usize| mirror_lobe.select(st.lobes[1].centre[i], st.lobes[0].centre[i]);
+        let sx = centre(0) + l11 * n1;
+        let sy = centre(1) + l21 * n1 + l22 * n2;
+        let inv = 1.0 / (sx * sx + sy * sy + 1.0).sqrt();
+        let h = [-sx * inv, -sy * inv, inv];
+        let dot = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2];
+        let lobe: Vec3 = std::array::from_fn(|i| h[i] * (2.0 * dot) - wi[i]);
+        let lobe_ok = dot.gt(0.0) & lobe[2].gt(MIN_COS) & lobe[2].finite();
+        let lobe = [
+            lobe_ok.select(lobe[0], 0.0),
+            lobe_ok.select(lobe[1], 0.0),
+            lobe_ok.select(lobe[2], -1.0),
+        ];
+        let cos_dir = cosine_direction_program(b, u1, u2);
+        let z = (1.0 - u1).max(2.0 * MIN_COS);
+        let ring = (1.0 - z * z).max(0.0).sqrt();
+        let uniform_dir = [ring * phi.cos(), ring * phi.sin(), z];
+        let mirror = [-wi[0], -wi[1], wi[2]];
+        let wo = std::array::from_fn(|i| {
+            let def = cosine.select(cos_dir[i], uniform_dir[i]);
+            let glossy = defensive.select(def, lobe[i]);
+            coherent.select(mirror[i], glossy)
+        });
+        Some(SampleProgram { wo, coherent })
+    }
+
+    fn pdf_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        let st = self.strategy_program(b, shading, wi, lambda_nm);
+        let defensive = (cosine_density_program(wo) + 0.5 / PI) * 0.5;
+        let lobe = self.lobe_pdf(b, &st, wi, wo);
+        let glossy = defensive * DEFENSIVE + lobe * (1.0 - DEFENSIVE);
+        Some((1.0 - st.p_coh) * glossy)
+    }
+}
+
+/// f / G in linear sRGB from the RGB program table.
+fn rgb_from_table<'a>(
+    b: &'a Builder,
+    t: &RgbProgramTable,
+    s: &GaussianSurface,
+    shading: &Shading,
+    pair: &PairProgram<'a>,
+) -> [Value<'a>; 3] {
+    let table = b.table(t.coef.clone());
+    let sw = (pair.w * s.sigma_um).abs();
+    let g0 = sw * sw;
+    let ln_g0 = sw.ln() * 2.0;
+    let x0 = pair.u * pair.u * (0.25 * s.corr_x_um * s.corr_x_um)
+        + pair.v * pair.v * (0.25 * s.corr_y_um * s.corr_y_um);
+    // Rows: below the lowest the values repeat it (ln(S / g0) constant).
+    let fu = ((ln_g0 - t.ln_g0_lo) * (1.0 / D_U)).clamp(0.0, (t.rows - 1) as f64);
+    let iu = fu.floor().min((t.rows - 2) as f64);
+    let rho2 = x0 / (g0 + t.inv_k_ref2);
+    let fv = (rho2 / (rho2 * (1.0 / (MAP_R * MAP_R)) + 1.0).sqrt()).sqrt() * (1.0 / D_V);
+    let inside = fv.lt((t.cols - 1) as f64);
+    let fv = fv.min((t.cols - 1) as f64);
+    let iv = fv.floor().min((t.cols - 2) as f64);
+    let base = iu * t.row_len as f64 + iv * t.values as f64;
+    let wu = bspline_weights(fu - iu);
+    let wv = bspline_weights(fv - iv);
+    let v = bicubic(b, table, base, t.row_len, t.values, t.values, wu, wv);
+    // K_j = Tx Ty / (4 pi w^2) k_j^2 S_j = sigma^2 Tx Ty / (4 pi g0) k_j^2 S_j.
+    let ln_scale = (s.sigma_um * s.sigma_um * s.corr_x_um * s.corr_y_um / (4.0 * PI)).ln();
+    let rgb = if t.values == 4 {
+        let n = (v[0] + ln_scale).exp();
+        if t.folded {
+            let c = pair.cos_half;
+            let cone = c * (c * c * -4.0).exp();
+            std::array::from_fn(|i| cone.fma(t.cos_slope[i], v[1 + i]) * n)
+        } else {
+            let scale = n * shading.fresnel.program(b, pair.cos_half, b.c(550.0));
+            [v[1] * scale, v[2] * scale, v[3] * scale]
+        }
+    } else {
+        let kernel: Vec<Value> = v.iter().map(|&l| (l + ln_scale).exp()).collect();
+        shading
+            .rgb_rule
+            .integrate_program(b, shading.fresnel, pair.cos_half, &kernel)
+    };
+    rgb.map(|c| inside.select(c, 0.0))
+}
+
+#[cfg(test)]
+#[path = "program_tests.rs"]
+mod tests;

@@ -37,11 +37,11 @@ use crate::optics::geometry::PairGeometry;
 use std::f64::consts::PI;
 
 /// Spacing of the rows in ln g0.
-const D_U: f64 = 0.15;
+pub(super) const D_U: f64 = 0.15;
 /// Spacing of the columns in v (rho units near the lobe).
-const D_V: f64 = 0.07;
+pub(super) const D_V: f64 = 0.07;
 /// Radius in rho0 beyond which the columns widen.
-const MAP_R: f64 = 10.0;
+pub(super) const MAP_R: f64 = 10.0;
 /// Smallest |w| = cos_i + cos_o covered.
 const W_MIN: f64 = 0.03;
 /// Smallest g at the reddest node covered (the universal table's lower end:
@@ -55,7 +55,7 @@ const CUT: f64 = -400.0;
 /// which ln S can change by ~100 in the far tails: it sits 400 below CUT,
 /// where the ringing no longer reaches the values in use (at -500 it cost
 /// 1e-2 relative at ln S ~ -400). Values more than 40 above it are exact.
-const FLOOR: f64 = -800.0;
+pub(super) const FLOOR: f64 = -800.0;
 /// Largest table (bytes) a material builds; above it (many nodes) the
 /// per-node path serves.
 pub const MAX_TABLE_BYTES: usize = 2 << 20;
@@ -100,6 +100,102 @@ fn rho2_at(vv: f64) -> f64 {
     0.5 * (a + (a * a + 4.0 * v4).sqrt())
 }
 
+/// Per row i of a grid over (ln g0, v) whose row i sits at ln g0 =
+/// `ln_g0_lo` + i D_U: the column (v / D_V) beyond which the ln S of every
+/// node of `k_per_um` is below `cut`. The largest S is at one of the
+/// extreme nodes (S falls with x, and x scales as k^2), and S falls
+/// monotonically with v, so this bisects on those two.
+pub(super) fn column_limits(
+    surface: &GaussianSurface,
+    k_per_um: &[f64],
+    ln_g0_lo: f64,
+    rows: usize,
+    k_ref2: f64,
+    cut: f64,
+) -> Vec<f64> {
+    let n = k_per_um.len();
+    let settings = surface.series;
+    // ln S of node j at (g0, rho0^2).
+    let ln_s = |j: usize, g0: f64, rho2: f64| {
+        let k2 = k_per_um[j] * k_per_um[j];
+        ln_poisson_series(g0 * k2, rho2 * (1.0 / k_ref2 + g0) * k2, &settings)
+    };
+    let mut limits = Vec::with_capacity(rows);
+    for i in 0..rows {
+        let g0 = (ln_g0_lo + i as f64 * D_U).exp();
+        let above = |vv: f64| {
+            let r2 = rho2_at(vv);
+            ln_s(0, g0, r2).max(ln_s(n - 1, g0, r2)) > cut
+        };
+        let (mut lo, mut hi) = (0.0, 4.0);
+        while above(hi) && hi < 1e3 {
+            lo = hi;
+            hi *= 2.0;
+        }
+        for _ in 0..10 {
+            let mid = 0.5 * (lo + hi);
+            if above(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        limits.push(hi / D_V);
+    }
+    limits
+}
+
+/// The samples of the grid of `rows` x `cols` points over (ln g0, v) from
+/// ln g0 = `ln_g0_lo` (row spacing D_U, column spacing D_V) with
+/// SPLINE_MARGIN more on every side: ln(k_j^2 S_j) of every node j of
+/// `k_per_um` at each point (`stride` values per point, the first
+/// `k_per_um.len()` used), ln S softly floored at FLOOR; v < 0 mirrors v > 0
+/// (the function is even in rho0). Row-major, (rows + 2 margins) x (cols +
+/// 2 margins) points.
+pub(super) fn node_samples(
+    surface: &GaussianSurface,
+    k_per_um: &[f64],
+    ln_g0_lo: f64,
+    rows: usize,
+    cols: usize,
+    k_ref2: f64,
+    stride: usize,
+) -> Vec<f64> {
+    let n = k_per_um.len();
+    let settings = surface.series;
+    let ln_k2: Vec<f64> = k_per_um.iter().map(|k| 2.0 * k.ln()).collect();
+    let row_g0 = |i: f64| (ln_g0_lo + i * D_U).exp();
+    let m = SPLINE_MARGIN;
+    let (ext_rows, ext_cols) = (rows + 2 * m, cols + 2 * m);
+    let mut grid = vec![0.0; ext_rows * ext_cols * stride];
+    let rho0: Vec<f64> = (m..ext_cols)
+        .map(|c| rho2_at((c - m) as f64 * D_V).sqrt())
+        .collect();
+    let mut root_x = vec![0.0; rho0.len()];
+    let mut ln_s_row = vec![0.0; rho0.len()];
+    for r in 0..ext_rows {
+        let g0 = row_g0(r as f64 - m as f64);
+        let row = &mut grid[r * ext_cols * stride..][..ext_cols * stride];
+        for j in 0..n {
+            let k2 = k_per_um[j] * k_per_um[j];
+            let scale = ((1.0 / k_ref2 + g0) * k2).sqrt();
+            for (x, &rho) in root_x.iter_mut().zip(&rho0) {
+                *x = rho * scale;
+            }
+            ln_poisson_series_along_x(g0 * k2, &root_x, &settings, FLOOR - 40.0, &mut ln_s_row);
+            for (c, &l) in ln_s_row.iter().enumerate() {
+                row[(c + m) * stride + j] = ln_k2[j] + soft_floor(l);
+            }
+        }
+        for c in 0..m {
+            let (head, tail) = row.split_at_mut(m * stride);
+            let image = &tail[(m - c) * stride..][..stride];
+            head[c * stride..][..stride].copy_from_slice(image);
+        }
+    }
+    grid
+}
+
 impl RgbNodeTable {
     /// The table of `surface` for the rule with wavenumbers `k_per_um`; None
     /// when the settings ask for exact series, the material covers nothing
@@ -135,39 +231,7 @@ impl RgbNodeTable {
             return None;
         }
         let rows = ((ln_g0_hi - ln_g0_lo) / D_U).ceil() as usize + 2;
-        let ln_k2: Vec<f64> = k_per_um.iter().map(|k| 2.0 * k.ln()).collect();
-        let settings = surface.series;
-        let row_g0 = |i: f64| (ln_g0_lo + i * D_U).exp();
-        // ln S of node j at (g0, rho0^2).
-        let ln_s = |j: usize, g0: f64, rho2: f64| {
-            let k2 = k_per_um[j] * k_per_um[j];
-            ln_poisson_series(g0 * k2, rho2 * (1.0 / k_ref2 + g0) * k2, &settings)
-        };
-        // Per row, the v beyond which every node is below CUT: the largest S
-        // is at one of the extreme nodes (S falls with x, and x scales as
-        // k^2), and S falls monotonically with v, so bisect on those two.
-        let mut limits = Vec::with_capacity(rows);
-        for i in 0..rows {
-            let g0 = row_g0(i as f64);
-            let above = |vv: f64| {
-                let r2 = rho2_at(vv);
-                ln_s(0, g0, r2).max(ln_s(n - 1, g0, r2)) > CUT
-            };
-            let (mut lo, mut hi) = (0.0, 4.0);
-            while above(hi) && hi < 1e3 {
-                lo = hi;
-                hi *= 2.0;
-            }
-            for _ in 0..10 {
-                let mid = 0.5 * (lo + hi);
-                if above(mid) {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            limits.push(hi / D_V);
-        }
+        let limits = column_limits(surface, k_per_um, ln_g0_lo, rows, k_ref2, CUT);
         let v_max = limits.iter().cloned().fold(0.0, f64::max);
         let max_cols = (MAX_TABLE_BYTES / (4 * stride * (rows + 2))).saturating_sub(2);
         let cols = ((v_max.ceil() as usize) + 2).min(max_cols);
@@ -183,36 +247,9 @@ impl RgbNodeTable {
                 limits[i].min(next).min((cols - 1) as f64) as f32
             })
             .collect();
-        // Samples with SPLINE_MARGIN beyond every end, `stride` node values
-        // per point; v < 0 mirrors v > 0 (the function is even in rho0).
         let m = SPLINE_MARGIN;
         let (ext_rows, ext_cols) = (rows + 2 * m, cols + 2 * m);
-        let mut grid = vec![0.0; ext_rows * ext_cols * stride];
-        let rho0: Vec<f64> = (m..ext_cols)
-            .map(|c| rho2_at((c - m) as f64 * D_V).sqrt())
-            .collect();
-        let mut root_x = vec![0.0; rho0.len()];
-        let mut ln_s_row = vec![0.0; rho0.len()];
-        for r in 0..ext_rows {
-            let g0 = row_g0(r as f64 - m as f64);
-            let row = &mut grid[r * ext_cols * stride..][..ext_cols * stride];
-            for j in 0..n {
-                let k2 = k_per_um[j] * k_per_um[j];
-                let scale = ((1.0 / k_ref2 + g0) * k2).sqrt();
-                for (x, &rho) in root_x.iter_mut().zip(&rho0) {
-                    *x = rho * scale;
-                }
-                ln_poisson_series_along_x(g0 * k2, &root_x, &settings, FLOOR - 40.0, &mut ln_s_row);
-                for (c, &l) in ln_s_row.iter().enumerate() {
-                    row[(c + m) * stride + j] = ln_k2[j] + soft_floor(l);
-                }
-            }
-            for c in 0..m {
-                let (head, tail) = row.split_at_mut(m * stride);
-                let image = &tail[(m - c) * stride..][..stride];
-                head[c * stride..][..stride].copy_from_slice(image);
-            }
-        }
+        let mut grid = node_samples(surface, k_per_um, ln_g0_lo, rows, cols, k_ref2, stride);
         prefilter_2d(&mut grid, ext_rows, ext_cols, stride);
         // Keep one coefficient beyond each end of the rows and columns.
         let row_len = (cols + 2) * stride;

@@ -11,6 +11,7 @@
 use super::{Gaussian, COHERENT_MAX_G};
 use crate::models::{f_spectral, Shading};
 use crate::optics::geometry::{normalize_direction, PairGeometry, MIN_COS};
+use crate::program::{Builder, Value};
 use crate::sampling::warps::{inverse_normal, normal_cdf, radical_inverse, uv_to_direction};
 use crate::sampling::{
     Component, Components, Mixture, SplitMix64, DEFENSIVE_FRACTION, RGB_BAND_NM,
@@ -541,5 +542,36 @@ impl AlbedoTable {
 
     pub fn memory_bytes(&self) -> usize {
         self.ln_albedo.len() * 8
+    }
+
+    /// `albedo` as program operations (crate::program): D / F^2 at cos_i
+    /// and lambda_nm by the same bilinear rule in (ln cos_i, lambda) on the
+    /// same values. Where `albedo` gives None this gives 0 or NaN, which the
+    /// caller tests (`d > 0 & finite`).
+    pub(super) fn program<'a>(
+        &self,
+        b: &'a Builder,
+        cos_i: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> Value<'a> {
+        if self.ln_albedo.len() != ALBEDO_COS_NODES * ALBEDO_LAMBDA_NODES {
+            return b.c(0.0);
+        }
+        let table = b.table(self.ln_albedo.iter().map(|&v| v as f32).collect());
+        let t = (1.0 - cos_i.clamp(ALBEDO_MIN_COS, 1.0).ln() * (1.0 / ALBEDO_MIN_COS.ln()))
+            * (ALBEDO_COS_NODES - 1) as f64;
+        let i = t.floor().min((ALBEDO_COS_NODES - 2) as f64);
+        let fi = t - i;
+        let (lo, hi) = RGB_BAND_NM;
+        let x = ((lambda_nm - lo) * (1.0 / (hi - lo))).clamp(0.0, 1.0)
+            * (ALBEDO_LAMBDA_NODES - 1) as f64;
+        let j = x.floor().min((ALBEDO_LAMBDA_NODES - 2) as f64);
+        let fj = x - j;
+        let base = i * ALBEDO_LAMBDA_NODES as f64 + j;
+        let at =
+            |di: usize, dj: usize| b.gather(table, base + (di * ALBEDO_LAMBDA_NODES + dj) as f64);
+        let row = |di: usize| (1.0 - fj) * at(di, 0) + fj * at(di, 1);
+        let ln = (1.0 - fi) * row(0) + fi * row(1);
+        ln.exp()
     }
 }
