@@ -424,13 +424,10 @@ fn variance_report() {
 }
 
 /// Importance sampling worth having: the programs' estimator never has more
-/// variance than cosine sampling, and about at most 2x the core's
-/// strategies': the goal is 2x, the bound 2.5x for the noise of 150k-sample
-/// estimates (heavy-tailed: the smooth surface at 70 degrees measures
-/// 1.5x with 2M samples, 1.9x with 150k), except for the smooth surface at
-/// cos_i 0.08 (2.6x with 2M samples: the core's horizon twin fits the lobe
-/// better there; its diffuse part is 0.3% of the albedo, so a few hundred
-/// samples carry the variance: bound 5x).
+/// variance than cosine sampling, and at most 2x the core's strategies':
+/// the goal is 2x, the bound 2.5x for the noise of 150k-sample estimates
+/// (heavy-tailed; with 1M samples the worst row, the smooth surface at 70
+/// degrees, measures 1.47x).
 #[test]
 fn sampling_variance_against_cosine_and_core() {
     let mut failures = Vec::new();
