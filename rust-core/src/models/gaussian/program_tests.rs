@@ -295,9 +295,9 @@ fn program_sizes() {
         for kind in ProgramKind::ALL {
             let p = exported(&b, kind).unwrap();
             let (ops, gathers) = counts(&p);
-            line += &format!(" {kind:?} {ops}/{gathers}");
+            line += &format!(" {kind:?} {ops}/{gathers}/{}k", p.table_len() * 4 / 1000);
         }
-        println!("{line}  (ops/gathers)");
+        println!("{line}  (ops/gathers/table kB)");
     }
     let (_, gathers) = counts(&exported(&brdf(MATERIALS[1].1), ProgramKind::EvalRgb).unwrap());
     let (_, fresnel) = counts(&exported(&brdf(MATERIALS[1].1), ProgramKind::EvalSpectral).unwrap());
@@ -499,6 +499,7 @@ fn rgb_table_layouts_match_native() {
         };
         let shading = b.shading();
         for per_node in [false, true] {
+            let start = std::time::Instant::now();
             let t = super::RgbProgramTable::build(
                 &model.surface,
                 shading.rgb_rule,
@@ -506,6 +507,7 @@ fn rgb_table_layouts_match_native() {
                 per_node,
             )
             .unwrap();
+            let built = start.elapsed();
             let bb = Builder::new();
             let ins: Vec<_> = (0..6).map(|_| bb.input()).collect();
             let pair = PairProgram::new(&bb, [ins[0], ins[1], ins[2]], [ins[3], ins[4], ins[5]]);
@@ -534,7 +536,7 @@ fn rgb_table_layouts_match_native() {
                 }
             }
             println!(
-                "{name:>18} {}: {} values per point, {} kB, max rel f32 {worst:.2e}",
+                "{name:>18} {}: {} values per point, {} kB, built in {built:.2?}, max rel f32 {worst:.2e}",
                 if per_node { "per node" } else { "as built" },
                 t.values,
                 t.memory_bytes() / 1024
