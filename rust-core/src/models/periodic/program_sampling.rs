@@ -110,9 +110,10 @@ struct Orders<'a> {
     /// Unnormalised probabilities (0 where not taken) and their sum.
     weight: Vec<Value<'a>>,
     total: Value<'a>,
-    /// RGB: the orders, the band mass of the wavelengths where their centre
-    /// is inside the disk, and their tilts kappa.
-    rgb_n: Vec<i64>,
+    /// RGB: whether the entry is order 0 (the mirror lobe), the band mass
+    /// of the wavelengths where the order's centre is inside the disk, and
+    /// its tilt kappa.
+    zero: Vec<bool>,
     band: Vec<[Value<'a>; 2]>,
 }
 
@@ -170,7 +171,7 @@ impl Periodic {
             take: Vec::new(),
             weight: Vec::new(),
             total: b.c(0.0),
-            rgb_n: Vec::new(),
+            zero: Vec::new(),
             band: Vec::new(),
         };
         match lambda {
@@ -193,27 +194,39 @@ impl Periodic {
             None => {
                 let (lo, hi) = RGB_BAND_NM;
                 let count = self.sampling_order_count(lo)?;
-                let n_max = (count - 2) as i64 / 2 + 1;
-                for n in -n_max..=n_max {
-                    let (la, lb) = if n == 0 {
+                // Orders n != 0 whose centre is inside the disk for some
+                // lambda of the band: n lambda / P in (a, b).
+                let (a, bb) = (-wi[0] - half, -wi[0] + half);
+                let (a_lo, a_hi) = (a * (period_nm / lo), a * (period_nm / hi));
+                let (b_lo, b_hi) = (bb * (period_nm / lo), bb * (period_nm / hi));
+                let first = -(-a_lo.min(a_hi)).floor(); // ceil
+                let last = b_lo.max(b_hi).floor();
+                let mut entries: Vec<(Value<'a>, Mask<'a>, bool)> = (0..count)
+                    .map(|i| {
+                        let n = first + i as f64;
+                        (n, n.le(last) & !n.eq(0.0), false)
+                    })
+                    .collect();
+                // Order 0, always (the mirror lobe).
+                entries.push((b.c(0.0), b.always(), true));
+                for (nv, in_range, zero) in entries {
+                    let (la, lb) = if zero {
                         (b.c(lo), b.c(hi))
                     } else {
                         // lambda where -wi.x - n lambda / P is within half.
-                        let (p, q) = (
-                            (-wi[0] - half) * (period_nm / n as f64),
-                            (-wi[0] + half) * (period_nm / n as f64),
-                        );
+                        let inv_n = 1.0 / in_range.select(nv, 1.0);
+                        let (p, q) = (a * period_nm * inv_n, bb * period_nm * inv_n);
                         (p.min(q).max(lo), p.max(q).min(hi))
                     };
-                    let mass = band_cdf(b, lb) - band_cdf(b, la);
-                    let mass = mass.max(0.0);
-                    let nv = b.c(n as f64);
+                    let mass = (band_cdf(b, lb) - band_cdf(b, la)).max(0.0);
                     let mid = (la + lb) * 0.5;
                     let w = self.order_weight_program(b, powers, wi, nv, mid) * mass;
                     // Tilt of the wavelength density towards the end of the
                     // interval with the larger weight (the rim, where G
                     // grows): exp(kappa c) in the band's CDF c.
-                    let kappa = if n != 0 {
+                    let kappa = if zero {
+                        b.c(0.0)
+                    } else {
                         let e = (lb - la) * TILT_INSET;
                         let qa = self.order_weight_program(b, powers, wi, nv, la + e);
                         let qb = self.order_weight_program(b, powers, wi, nv, lb - e);
@@ -221,16 +234,14 @@ impl Periodic {
                             .ln()
                             .clamp(-TILT_MAX, TILT_MAX);
                         k.finite().select(k, 0.0)
-                    } else {
-                        b.c(0.0)
                     };
-                    let take = la.lt(lb) & mass.gt(0.0);
+                    let take = in_range & la.lt(lb) & mass.gt(0.0);
                     let w = take.select(w, 0.0);
                     out.total = out.total + w;
                     out.n.push(nv);
                     out.take.push(take);
                     out.weight.push(w);
-                    out.rgb_n.push(n);
+                    out.zero.push(zero);
                     out.band.push([mass, kappa]);
                 }
             }
@@ -356,12 +367,19 @@ impl Periodic {
             None => {
                 let nodes = b.table(band_nodes().map(|x| x as f32).to_vec());
                 let zero = zero_order_nodes();
-                for ((&n, &w), bd) in orders.rgb_n.iter().zip(&orders.weight).zip(&orders.band) {
-                    if n != 0 {
-                        // lambda on this order's rainbow at u.
+                for (((&n, &w), bd), &is_zero) in orders
+                    .n
+                    .iter()
+                    .zip(&orders.weight)
+                    .zip(&orders.band)
+                    .zip(&orders.zero)
+                {
+                    if !is_zero {
+                        // lambda on this order's rainbow at u (w = 0 where
+                        // the order is not taken, n = 0 among them).
                         let [_, kappa] = *bd;
-                        let nf = n as f64;
-                        let lambda = u * (period_nm / nf);
+                        let nn = n.eq(0.0).select(1.0, n);
+                        let lambda = u * period_nm / nn;
                         let small = kappa.abs().lt(1e-3);
                         let kk = small.select(1.0, kappa);
                         let c = band_cdf(b, lambda);
@@ -370,7 +388,8 @@ impl Periodic {
                         let sigma = self.sigma(lambda.max(1.0));
                         let nv =
                             (-(v * v) / (sigma * sigma * 2.0)).exp() / (sigma * (2.0 * PI).sqrt());
-                        lobe = lobe + w * rho * tilt * (period_nm / nf.abs()) * nv;
+                        let term = w * rho * tilt * (period_nm / nn.abs()) * nv;
+                        lobe = lobe + w.gt(0.0).select(term, 0.0);
                     } else {
                         // Order 0: the nodes' Gaussians.
                         let rho2 = u * u + v * v;
