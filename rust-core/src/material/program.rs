@@ -90,7 +90,7 @@ impl Brdf {
                 } else {
                     let (lambda, in_band) = band(b.input());
                     let k = (2000.0 * PI) / lambda;
-                    let kernel = model.kernel_program(&b, &pair, k)?;
+                    let kernel = model.kernel_program_at(&b, &pair, k, lambda)?;
                     let f2 = self.fresnel.program(&b, pair.cos_half, lambda);
                     let f = (f2 * pair.geometric_factor * kernel).finite_non_negative();
                     vec![(pair.valid & in_band).select(f, 0.0)]
