@@ -505,6 +505,19 @@ public:
             << "  coherent_lobe = " << (m_has_coherent ? "true" : "false");
         if (!m_warnings.empty())
             oss << "," << std::endl << "  warnings = " << json_escape(m_warnings);
+        if constexpr (dr::is_jit_v<Float>) {
+            oss << "," << std::endl << "  jit_programs = ";
+            if (m_jit_ready) {
+                const char *names[] = { "eval", "pdf", "sample", "coherent" };
+                const Prog *progs[] = { &m_eval, &m_pdf, &m_sample, &m_coherent };
+                for (size_t k = 0; k < 4; ++k)
+                    oss << names[k] << " " << progs[k]->n_instructions() << " ops "
+                        << progs[k]->n_gathers() << " gathers, ";
+                oss << "tables " << dr::width(m_tables) << " values";
+            } else {
+                oss << "none of " << m_jit_missing << " (evaluated mode only)";
+            }
+        }
         oss << std::endl << "]";
         return oss.str();
     }
@@ -541,7 +554,7 @@ private:
         bool ready = false;  // every kind this variant needs exists
         std::string missing; // else: the kinds the core does not export
         Prog eval, pdf, sample, coherent;
-        std::vector<float> tables;
+        program::TableStorage tables;
     };
 
     /// A core material built from the current parameters, not yet in use
@@ -744,9 +757,9 @@ private:
             m_sample = std::move(c.jit.sample);
             m_coherent = std::move(c.jit.coherent);
             // One array per material (device memory on CUDA), never empty
-            if (c.jit.tables.empty())
-                c.jit.tables.push_back(0.f);
-            m_tables = dr::load<FloatStorage>(c.jit.tables.data(), c.jit.tables.size());
+            const std::vector<float> &t = c.jit.tables.values();
+            m_tables = t.empty() ? dr::zeros<FloatStorage>(1)
+                                 : dr::load<FloatStorage>(t.data(), t.size());
         }
         double t = (double) m_twist * M_PI / 180.0;
         m_cos_twist = (ScalarFloat) std::cos(t);

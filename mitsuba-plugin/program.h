@@ -18,8 +18,10 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <stdexcept>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "../rust-core/include/stam.h"
@@ -208,6 +210,40 @@ inline std::vector<float> export_program(const StamBrdf *b, uint32_t kind) {
     return v;
 }
 
+/// The host values of the tables of several programs, each distinct table
+/// once (programs of one material share some: the spectral Gaussian's eval
+/// and pdf read the same 281,502-value series table), loaded by the caller
+/// into one device array.
+class TableStorage {
+public:
+    /// Where `n` values equal to `src` start in the storage (appended unless
+    /// an equal table is there already).
+    uint32_t add(const float *src, size_t n) {
+        uint64_t h = 1469598103934665603ull ^ n; // FNV-1a over the bits
+        const unsigned char *bytes = (const unsigned char *) src;
+        for (size_t i = 0; i < n * sizeof(float); ++i)
+            h = (h ^ bytes[i]) * 1099511628211ull;
+        auto range = m_index.equal_range(h);
+        for (auto it = range.first; it != range.second; ++it)
+            if (it->second.second == n &&
+                (n == 0 || std::memcmp(m_values.data() + it->second.first, src,
+                                       n * sizeof(float)) == 0))
+                return it->second.first;
+        if (m_values.size() + n >= (size_t(1) << 31))
+            throw Malformed("tables of more than 2^31 values");
+        uint32_t base = (uint32_t) m_values.size();
+        m_values.insert(m_values.end(), src, src + n);
+        m_index.emplace(h, std::make_pair(base, n));
+        return base;
+    }
+    const std::vector<float> &values() const { return m_values; }
+    bool empty() const { return m_values.empty(); }
+
+private:
+    std::vector<float> m_values;
+    std::unordered_multimap<uint64_t, std::pair<uint32_t, size_t>> m_index;
+};
+
 /// A program ready to run with Dr.Jit arrays of type Float (an LLVM or CUDA
 /// array; AD arrays differentiate through it). Its tables live in a buffer
 /// the caller holds (several programs share one, so that a material has a
@@ -219,17 +255,13 @@ public:
 
     Program() = default;
 
-    /// Decode `v` (throws Malformed); its tables are appended to `storage`
-    /// (host values, loaded into the device buffer by the caller).
-    Program(const std::vector<float> &v, std::vector<float> &storage)
+    /// Decode `v` (throws Malformed); its tables go to `storage` (host
+    /// values, loaded into the device buffer by the caller).
+    Program(const std::vector<float> &v, TableStorage &storage)
         : m_code(decode_program(v.data(), v.size())) {
-        for (size_t t = 0; t < m_code.table_offset.size(); ++t) {
-            m_table_base.push_back((uint32_t) storage.size());
-            const float *src = v.data() + m_code.table_offset[t];
-            storage.insert(storage.end(), src, src + m_code.table_len[t]);
-        }
-        if (storage.size() >= (size_t(1) << 31))
-            throw Malformed("tables of more than 2^31 values");
+        for (size_t t = 0; t < m_code.table_offset.size(); ++t)
+            m_table_base.push_back(
+                storage.add(v.data() + m_code.table_offset[t], m_code.table_len[t]));
     }
 
     bool valid() const { return !m_code.code.empty() || !m_code.outputs.empty(); }

@@ -225,12 +225,13 @@ def program_stats(v):
             'table_values': int(lens.sum())}
 
 
-def run_program(v, inputs, dtype=np.float64):
+def run_program(v, inputs, dtype=np.float64, elementary=None):
     """Run an exported program array on the CPU with numpy, lane by lane as
     the core's executor (program::Program::run, rust-core/src/program/
     interpret.rs): inputs is a sequence of n_inputs arrays (broadcast
     together); returns the list of outputs. The reference of the plugin's
-    executor (mitsuba-plugin/program.h)."""
+    executor (mitsuba-plugin/program.h). elementary: {op: function} for
+    some of exp, log, sin, cos, atan2 (default numpy's)."""
     v = np.asarray(v, dtype=np.float32)
     if len(v) < PROGRAM_HEADER_LEN or int(v[0]) != PROGRAM_FORMAT or int(v[5]) != len(v):
         raise ValueError('not a program array of format %d'
@@ -263,6 +264,9 @@ def run_program(v, inputs, dtype=np.float64):
                 else:
                     x = np.clip(np.where(np.isnan(x), 0.0, x), 0.0, len(t) - 1)
                     r = t[x.astype(np.int64)].astype(dtype)
+            elif elementary and op in elementary:
+                r = elementary[op](*[regs[k] for k in (a, b)[:2 if op == 'atan2' else 1]])
+                r = np.asarray(r, dtype=dtype)
             else:
                 A = regs[a]
                 B = regs[b] if b < len(regs) else None
@@ -324,17 +328,21 @@ def test_eval_equals_the_core(variant, surface):
             ref = np.stack([c.eval_spectral(wi, wo, lam[:, j]) for j in range(4)])
             f32 = np.stack([run32(progs['eval_spectral'], [*wi.T, *wo.T, lam[:, j]])[0]
                             for j in range(4)])
+            f32n = np.stack([run32(progs['eval_spectral'], [*wi.T, *wo.T, lam[:, j]], False)[0]
+                             for j in range(4)])
             tol = SPECTRAL_TOL
         else:
             ref = c.eval_rgb(wi, wo).T
             f32 = np.stack(run32(progs['eval_rgb'], [*wi.T, *wo.T]))
+            f32n = np.stack(run32(progs['eval_rgb'], [*wi.T, *wo.T], False))
             if mi.is_monochromatic:   # the luminance of RGB, with the core's weights
                 ref = (stam_core.SRGB_LUMINANCE @ ref)[None]
                 f32 = (stam_core.SRGB_LUMINANCE @ f32)[None]
+                f32n = (stam_core.SRGB_LUMINANCE @ f32n)[None]
             tol = RGB_TOL
     err = relative_errors(got, ref, axis)
     err_exec = relative_errors(got, f32.astype(np.float64), axis)
-    err_prog = relative_errors(f32.astype(np.float64), ref, axis)
+    err_prog = relative_errors(f32n.astype(np.float64), ref, axis)
     worst = np.unravel_index(np.argmax(err), err.shape)[-1]
     report(test='eval', variant=variant, surface=surface, max_error=float(err.max()),
            p99=float(np.quantile(err, 0.99)), executor_max_error=float(err_exec.max()),
@@ -387,13 +395,32 @@ def test_twist_rotates_the_frame_in_symbolic_mode(variant):
 # pdf, sample: against the exported programs; consistency
 # ---------------------------------------------------------------------------
 
+def _drjit_elementary():
+    """Dr.Jit's exp, log, sin, cos, atan2 (LLVM backend) on numpy float32."""
+    import drjit.llvm as L
+
+    def wrap(f, arity=1):
+        def g(*xs):
+            shape = np.broadcast_shapes(*[np.shape(x) for x in xs])
+            args = [L.Float(np.broadcast_to(np.asarray(x, dtype=np.float32), shape).ravel())
+                    for x in xs]
+            return np.array(f(*args), dtype=np.float32).reshape(shape)
+        return g
+    return {'exp': wrap(dr.exp), 'log': wrap(dr.log), 'sin': wrap(dr.sin), 'cos': wrap(dr.cos),
+            'atan2': wrap(dr.atan2, 2)}
+
+
 # The plugin's kernels compute in f32: the references run the programs in f32
-# too (numpy, from f32 inputs). The programs' own f32 rounding (up to 4e-4
-# relative in the fractal pdf at grazing near-mirror pairs, against f64) is
-# the concern of the core's program tests, not of the executor's.
-def run32(prog, inputs):
+# too (numpy, from f32 inputs), with Dr.Jit's own exp, log, sin, cos and
+# atan2 (elementary=True): what is compared is then the executor (one op per
+# instruction, gathers, masks, selects). Dr.Jit's exp differs from a
+# correctly rounded one by a relative 2^-24 |x| log2(e), which some programs
+# amplify (the anisotropic Gaussian's pdf at grazing incidence: 5e-4): that is
+# the arithmetic of every Dr.Jit kernel, the program's conditioning the
+# concern of the core's program tests.
+def run32(prog, inputs, elementary=True):
     return run_program(prog, [np.asarray(x, dtype=np.float32) for x in inputs],
-                       dtype=np.float32)
+                       dtype=np.float32, elementary=_drjit_elementary() if elementary else None)
 
 
 def program_pdf(progs, wi, wo, lam):
@@ -477,7 +504,7 @@ def test_pdf_and_sample_equal_the_programs(variant, surface):
     r, p_c = program_coherent(progs, wi, lam)
     if coh.any():
         assert np.allclose(spdf[coh], p_c[coh], rtol=1e-5)
-        assert np.allclose(w[:, coh], (r / p_c)[:, coh], rtol=1e-4, atol=1e-7)
+        assert np.allclose(w[:, coh], r[:, coh] / p_c[coh], rtol=1e-4, atol=1e-7)
         mirror = wi * [-1, -1, 1]
         assert np.allclose(swo[coh], mirror[coh], atol=1e-5)
     report(test='pdf_sample', variant=variant, surface=surface, pdf_max_error=float(err_pdf.max()),
@@ -522,20 +549,26 @@ def test_bad_input_gives_finite_non_negative_values(variant, surface):
     good = [0.3, 0.2, math.sqrt(1 - 0.13)]
     dirs = [[nan, 0, 1], [0, 0, nan], [0.3, 0, -0.9], [0, 0, 0], [inf, 0, 1], [1, 0, 0],
             [0, 0, 1e-30], good]
-    wi = np.array([a for a in dirs for _ in dirs], dtype=np.float64)
-    wo = np.array([c for _ in dirs for c in dirs], dtype=np.float64)
-    n = len(wi)
-    for lam in ((0.0,) * 4, (nan,) * 4, (-500.0, 1e9, inf, 550.0), WAVELENGTHS):
-        si = make_si(wi, lam)
-        ctx = mi.BSDFContext()
-        outs = [b.eval(ctx, si, mi.Vector3f(wo.T)), b.pdf(ctx, si, mi.Vector3f(wo.T))]
-        for s in (0.0, 0.5, 1.0 - 2 ** -24):
-            bs, w = b.sample(ctx, si, mi.Float(np.full(n, s)), mi.Point2f(s, 1 - s))
-            outs += [w, bs.pdf]
-            assert np.all(np.isfinite(to_np(bs.wo)))
-        for o in outs:
-            o = to_np(o)
-            assert np.all(np.isfinite(o)) and np.all(o >= 0), (lam, o)
+    lams = [(0.0,) * 4, (nan,) * 4, (-500.0, 1e9, inf, 550.0), WAVELENGTHS]
+    # every (wi, wo, wavelengths, sample) combination in one call of each method
+    cases = [(a, c, lam, u) for a in dirs for c in dirs for lam in lams
+             for u in (0.0, 0.5, 1.0 - 2 ** -24)]
+    wi = np.array([k[0] for k in cases], dtype=np.float64)
+    wo = np.array([k[1] for k in cases], dtype=np.float64)
+    lam = np.array([k[2] for k in cases], dtype=np.float64)
+    u = np.array([k[3] for k in cases], dtype=np.float64)
+    si = make_si(wi, lam)
+    ctx = mi.BSDFContext()
+    outs = [b.eval(ctx, si, mi.Vector3f(wo.T)), b.pdf(ctx, si, mi.Vector3f(wo.T))]
+    bs, w = b.sample(ctx, si, mi.Float(u), mi.Point2f(u, 1 - u))
+    outs += [w, bs.pdf]
+    assert np.all(np.isfinite(to_np(bs.wo)))
+    for o in outs:
+        o = to_np(o)
+        assert np.all(np.isfinite(o)) and np.all(o >= 0), o
+    # the good pair at the good wavelengths answers
+    ok = [i for i, k in enumerate(cases) if k[0] is good and k[1] is good and k[2] is WAVELENGTHS]
+    assert np.all(to_np(outs[1])[ok] > 0)
 
 
 # ---------------------------------------------------------------------------
@@ -880,7 +913,7 @@ def test_decoder_refuses_malformed_arrays(decoder, tmp_path):
     # abort on any read outside the array)
     rng = np.random.default_rng(7)
     values = [float('nan'), float('inf'), -1.0, 0.5, 1e9, 2.0 ** 24, 0.0, 3.0]
-    for t in range(300):
+    for t in range(120):
         w = v.copy()
         for _ in range(rng.integers(1, 4)):
             i = rng.integers(0, code_at + 4 * n_code)

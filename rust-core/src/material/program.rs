@@ -98,7 +98,7 @@ impl Brdf {
                 } else {
                     let (lambda, in_band) = band(b.input());
                     let k = (2000.0 * PI) / lambda;
-                    let kernel = model.kernel_program(&b, &pair, k)?;
+                    let kernel = model.kernel_program_at(&b, &pair, k, lambda)?;
                     let f2 = self.fresnel.program(&b, pair.cos_half, lambda);
                     let mut f = f2 * pair.geometric_factor * kernel;
                     if let Some(e) = energy {

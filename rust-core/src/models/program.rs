@@ -31,6 +31,22 @@ pub trait SurfacePrograms {
         None
     }
 
+    /// `kernel_program` with the wavelength k was taken from (in-band, nm):
+    /// the material calls this one. k in f32 carries the rounding of its
+    /// division (6e-8), which moves a grating's narrow peaks by a visible
+    /// fraction of their width at high orders; a model whose kernel needs
+    /// the exact input wavelength overrides this, the others keep
+    /// `kernel_program`.
+    fn kernel_program_at<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        k_per_um: Value<'a>,
+        _lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        self.kernel_program(b, pair, k_per_um)
+    }
+
     /// `reflectance_rgb`: F^2 K integrated against the linear sRGB
     /// matching functions (f / G), before gamut mapping.
     fn reflectance_rgb_program<'a>(

@@ -94,8 +94,9 @@ pub fn eval_spectral_errors(brdf: &Brdf, pairs: &[(DVec3, DVec3)], seed: u64) ->
     let rows: Vec<(DVec3, DVec3, f64, f64)> = pairs
         .iter()
         .map(|&(wi, wo)| {
-            let lambda = 360.0 + 470.0 * rng.three()[0];
-            // The directions as the program sees them (f32).
+            // The directions and the wavelength as the program sees them
+            // (f32).
+            let lambda = (360.0 + 470.0 * rng.three()[0]) as f32 as f64;
             let (wi, wo) = (round(wi), round(wo));
             (wi, wo, lambda, brdf.eval_spectral(wi, wo, lambda))
         })
@@ -103,7 +104,7 @@ pub fn eval_spectral_errors(brdf: &Brdf, pairs: &[(DVec3, DVec3)], seed: u64) ->
     let peak = rows.iter().map(|r| r.3).fold(1e-300, f64::max);
     let mut errors = Errors::default();
     for &(wi, wo, lambda, native) in &rows {
-        let inputs = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, lambda as f32 as f64];
+        let inputs = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, lambda];
         let (p32, p64) = run_both(&program, &inputs);
         compare(&mut errors, native, p32[0], p64[0], 1e-6 * peak, peak);
     }

@@ -10,25 +10,27 @@
 //!   `rgb.rs` (g0 = (sigma w)^2, x0 = (Tx^2 u^2 + Ty^2 v^2) / 4: every node
 //!   of the rule is a function of these two), sampled from the same series
 //!   values as the native node table and extended down to both-grazing
-//!   pairs. Where the Fresnel-weighted rule allows it (a wavelength-flat
-//!   Fresnel term, or an isotropic surface, whose half-vector cosine is a
-//!   function of (g0, x0)), each grid point holds the rule's sum itself,
-//!   as ln N (N = sum_j K_j m_j, m_j > 0) and the three channels over N:
-//!   one lookup of 4 values serves every node (64 gathers). Anisotropic
-//!   surfaces with a metal's Fresnel keep ln(k_j^2 S_j) of every node (the
-//!   native node table's layout) and the Fresnel-weighted rule
-//!   (`RgbRule::integrate_program`).
+//!   pairs (below its rows ln(S / g0) is constant to ~g e^(x/2)). Where the
+//!   Fresnel-weighted rule allows it (a wavelength-flat Fresnel term, or an
+//!   isotropic surface, whose half-vector cosine is a function of (g0,
+//!   x0)), each grid point holds the rule's sum itself, as ln(N / g0) (N =
+//!   sum_j K_j m_j, m_j > 0) and the three channels over N: one lookup of
+//!   4 values serves every node (64 gathers). Anisotropic surfaces with a
+//!   metal's Fresnel keep ln(k_j^2 S_j / g0) of every node (the native node
+//!   table's layout: 16 N gathers) and the Fresnel-weighted rule in its
+//!   low-rank form (`weighted_sum`).
 //! - Coherent lobe: F^2 e^-g as native, RGB by the rule at the nodes.
-//! - Sampling: a defensive mixture (cosine and uniform) with a lobe of
-//!   half-vector slopes: for g0 (the roughness exponent at the mirror
-//!   direction) below `SERIES_MAX_G`, the series' own mixture of Gaussians
-//!   (term m ~ Poisson(g0 | m >= 1), slope variance alpha^2 m / (2 g0) per
-//!   axis: the diffraction lobe of smooth surfaces), whose density is one
-//!   evaluation of S; above it the Beckmann asymptote (alpha = 2 sigma / T
-//!   per axis). Slopes are reflected about their normal, so the lobe lives
-//!   in solid angle and stays finite at the horizon. The coherent
-//!   probability follows the model's own albedo table (isotropic surfaces)
-//!   as native.
+//! - Sampling: a defensive mixture (cosine and uniform, as the core's) and
+//!   lobes in the half-vector slopes: for g0 (the roughness exponent at the
+//!   mirror direction) below `SERIES_MAX_G`, the series' own mixture of
+//!   Gaussians (term m ~ Poisson(g0 | m >= 1), variances m times a base),
+//!   whose density is one lookup of S, with a base fitted to the law (see
+//!   `slope_lobes`) and one frozen at the mirror; above it the Beckmann
+//!   asymptote (alpha = 2 sigma / T per axis). Slopes are reflected about
+//!   their normal, so the lobes live in solid angle and stay finite at the
+//!   horizon. Isotropic surfaces near the rim add the core's horizon twin.
+//!   The coherent probability follows the model's own albedo table
+//!   (isotropic surfaces) as native.
 
 use super::rgb::{column_limits, node_samples, D_U, D_V, MAP_R};
 use super::sampling::{AlbedoTable, BECKMANN_MIN_G};
@@ -65,6 +67,9 @@ pub const RGB_SAMPLING_NM: f64 = 550.0;
 /// Share of the lobe probability of the lobe frozen at the mirror (the
 /// rest: the fitted lobe).
 const MIRROR_LOBE: f64 = 0.3;
+/// Share of the lobe probability of the horizon twin (isotropic surfaces,
+/// near the rim) for smooth surfaces (times e^-g_far).
+const TWIN_SHARE: f64 = 0.8;
 /// Share of the non-coherent probability of the defensive part (half
 /// cosine, half uniform), as the core's strategies.
 const DEFENSIVE: f64 = crate::sampling::DEFENSIVE_FRACTION;
@@ -378,6 +383,90 @@ struct Strategy<'a> {
     /// probability of the second.
     lobes: [SlopeLobe<'a>; 2],
     mix: Value<'a>,
+    /// Isotropic surfaces: the horizon twin and its probability (0 away
+    /// from the rim).
+    twin: Option<(TwinLobe<'a>, Value<'a>)>,
+}
+
+/// The core's horizon twin (`sampling::HorizonLobe`): with (x', y') the
+/// plane coordinates along and across the mirror point and x' = R cos
+/// alpha, R = sqrt(1 - y'^2), z = R sin alpha, d omega = d alpha dy'; y' ~
+/// N(0, s), alpha ~ N(mean, sd) (a Laplace fit with the (1 + wi.wo)^2
+/// tilt). Here alpha is not truncated: a draw outside (0, pi) fails, so the
+/// density is the plain product of the normals.
+struct TwinLobe<'a> {
+    along: [Value<'a>; 2],
+    s: Value<'a>,
+    mean: Value<'a>,
+    sd: Value<'a>,
+}
+
+impl<'a> TwinLobe<'a> {
+    /// `sampling::HorizonLobe::new` for an isotropic lobe of plane sd `s`
+    /// (`alpha_law` with four Newton steps).
+    fn new(wi: Vec3<'a>, s: Value<'a>, tilt: Value<'a>) -> TwinLobe<'a> {
+        let rho0 = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        let cos_i = wi[2];
+        let off = rho0.gt(1e-12);
+        let inv = 1.0 / rho0.max(1e-12);
+        let along = [off.select(-wi[0] * inv, 1.0), off.select(-wi[1] * inv, 0.0)];
+        let s2 = s * s;
+        // alpha from acos(rho0) (r = 1 > rho0 above the horizon).
+        let mut alpha = cos_i.atan2(rho0);
+        let mut active = s.gt(0.0);
+        let mut curvature = s * 0.0 - 1.0;
+        for _ in 0..4 {
+            let (sin_a, cos_a) = (alpha.sin(), alpha.cos());
+            let q = cos_a - rho0;
+            let h = (1.0 - (rho0 * cos_a - cos_i * sin_a)).max(1e-30);
+            let dh = rho0 * sin_a + cos_i * cos_a;
+            let d1 = tilt * dh / h * 2.0 + q * sin_a / s2;
+            let c = tilt * ((1.0 - h) / h - (dh / h) * (dh / h)) * 2.0
+                - (sin_a * sin_a - q * cos_a) / s2;
+            let concave = c.lt(0.0);
+            active = active & concave;
+            curvature = active.select(c, curvature);
+            let next = (alpha - d1 / c).clamp(0.0, PI);
+            let moved = (next - alpha).abs().ge(1e-9);
+            alpha = active.select(next, alpha);
+            active = active & moved;
+        }
+        let laplace = curvature.lt(0.0).select((-1.0 / curvature).sqrt(), PI);
+        let quartic = (s * 2.0).sqrt();
+        let sd = laplace.min(quartic).clamp(1e-9, PI);
+        TwinLobe {
+            along,
+            s,
+            mean: alpha,
+            sd,
+        }
+    }
+
+    /// The direction from two standard normals; below the horizon when the
+    /// draw fails.
+    fn direction(&self, n1: Value<'a>, n2: Value<'a>) -> Vec3<'a> {
+        let y = self.s * n1;
+        let alpha = self.mean + self.sd * n2;
+        let r = (1.0 - y * y).max(0.0).sqrt();
+        let (x, z) = (r * alpha.cos(), r * alpha.sin());
+        let ok = y.abs().lt(1.0) & alpha.gt(0.0) & alpha.lt(PI) & z.gt(MIN_COS);
+        let [ax, ay] = self.along;
+        [
+            ok.select(x * ax - y * ay, 0.0),
+            ok.select(x * ay + y * ax, 0.0),
+            ok.select(z, -1.0),
+        ]
+    }
+
+    /// The solid-angle density at unit wo.
+    fn pdf(&self, wo: Vec3<'a>) -> Value<'a> {
+        let [ax, ay] = self.along;
+        let x = wo[0] * ax + wo[1] * ay;
+        let y = wo[1] * ax - wo[0] * ay;
+        let alpha = wo[2].atan2(x);
+        let (ty, ta) = (y / self.s, (alpha - self.mean) / self.sd);
+        ((ty * ty + ta * ta) * -0.5).exp() / (self.s * self.sd * (2.0 * PI))
+    }
 }
 
 /// A lobe in slope space: its centre, the precision matrix of its base
@@ -477,13 +566,36 @@ impl Gaussian {
         let g0 = a * a;
         let series = g0.lt(SERIES_MAX_G);
         let (lobes, m_mean) = self.slope_lobes(b, wi, k, g0, series);
+        // The twin (isotropic surfaces, the series regime) where the mirror
+        // point is within 2 plane sds of the rim (as `build_component`).
+        // Its share TWIN_SHARE e^-g_far, g_far = (k sigma)^2 the roughness
+        // at w = 1: a twin frozen at the mirror fits smooth surfaces, but
+        // where g grows tenfold inwards the real lobe is much wider (the
+        // core widens its defensive share there instead); the lobe frozen
+        // at the mirror keeps the rest of its share.
+        let (twin, frozen_share) = if s.isotropic {
+            let sd = (m_mean * 2.0).sqrt() / (k * s.corr_x_um);
+            let to_rim = 1.0 - (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+            let near = series & to_rim.lt(sd * 2.0);
+            let kf = k * s.sigma_um;
+            let smooth = near.select((-(kf * kf)).exp(), 0.0);
+            let twin = TwinLobe::new(wi, sd, (-g0).exp());
+            (
+                Some((twin, smooth * TWIN_SHARE)),
+                (1.0 - smooth) * MIRROR_LOBE,
+            )
+        } else {
+            (None, b.c(MIRROR_LOBE))
+        };
+        let mix = frozen_share;
         Strategy {
             p_coh,
             series,
             g0,
             m_mean,
             lobes,
-            mix: b.c(MIRROR_LOBE),
+            mix,
+            twin,
         }
     }
 
@@ -635,9 +747,16 @@ impl Gaussian {
             let series_density = series(b, &lk, g0, ln_g0, x) * series_norm;
             norm * st.series.select(series_density, (quad * -0.5).exp())
         };
-        let p_slope = density(&st.lobes[0]) * (1.0 - st.mix) + density(&st.lobes[1]) * st.mix;
-        let pdf = p_slope / (hz * hz * hz * cos_ih * 4.0);
-        (hz.gt(0.0) & cos_ih.gt(0.0)).select(pdf, 0.0)
+        let to_omega = 1.0 / (hz * hz * hz * cos_ih * 4.0);
+        let half_vector = hz.gt(0.0) & cos_ih.gt(0.0);
+        let fitted = half_vector.select(density(&st.lobes[0]) * to_omega, 0.0);
+        let frozen = half_vector.select(density(&st.lobes[1]) * to_omega, 0.0);
+        let slopes = fitted * (1.0 - st.mix) + frozen * st.mix;
+        match &st.twin {
+            // The twin's share comes first; the slope lobes share the rest.
+            Some((twin, share)) => twin.pdf(wo) * *share + slopes * (1.0 - *share),
+            None => slopes,
+        }
     }
 }
 
@@ -706,7 +825,7 @@ impl SurfacePrograms for Gaussian {
             .iter()
             .map(|&k| (c2 * (-k * k)).exp())
             .collect();
-        let rgb = rule.integrate_program(b, shading.fresnel, cos_i, &values);
+        let rgb = weighted_sum(b, shading, cos_i, &values);
         let k_red = wavenumber_per_um(LAMBDA_MAX_NM);
         let gone = (c2 * (k_red * k_red)).gt(COHERENT_MAX_G);
         Some(rgb.map(|c| gone.select(0.0, c)))
@@ -740,7 +859,16 @@ impl SurfacePrograms for Gaussian {
         let defensive = t.lt(DEFENSIVE);
         let cosine = t.lt(0.5 * DEFENSIVE);
         let t_lobe = ((t - DEFENSIVE) * (1.0 / (1.0 - DEFENSIVE))).clamp(0.0, 1.0 - 1e-7);
-        // The first `mix` of it picks the mirror lobe, then the term.
+        // The twin's share of it first (remapped), then the mirror lobe's
+        // `mix` of the rest, then the term.
+        let (use_twin, t_lobe) = match &st.twin {
+            Some((_, share)) => {
+                let use_twin = t_lobe.lt(*share);
+                let rest = ((t_lobe - *share) / (1.0 - *share).max(1e-30)).clamp(0.0, 1.0 - 1e-7);
+                (Some(use_twin), rest)
+            }
+            None => (None, t_lobe),
+        };
         let mirror_lobe = t_lobe.lt(st.mix);
         let t_lobe = mirror_lobe
             .select(t_lobe / st.mix, (t_lobe - st.mix) / (1.0 - st.mix))
@@ -758,9 +886,10 @@ impl SurfacePrograms for Gaussian {
         }
         let spread = st.series.select((m / st.m_mean).sqrt(), 1.0);
         // Box-Muller: two normals from u1, u2, then the lobe's Gaussian.
-        let r = (-(1.0 - u1).ln()).sqrt() * std::f64::consts::SQRT_2 * spread;
+        let r = (-(1.0 - u1).ln()).sqrt() * std::f64::consts::SQRT_2;
         let phi = u2 * (2.0 * PI);
-        let (n1, n2) = (r * phi.cos(), r * phi.sin());
+        let (b1, b2) = (r * phi.cos(), r * phi.sin());
+        let (n1, n2) = (b1 * spread, b2 * spread);
         let pick = |i: usize| mirror_lobe.select(st.lobes[1].chol[i], st.lobes[0].chol[i]);
         let (l11, l21, l22) = (pick(0), pick(1), pick(2));
         let centre = |i: usize| mirror_lobe.select(st.lobes[1].centre[i], st.lobes[0].centre[i]);
@@ -771,11 +900,15 @@ impl SurfacePrograms for Gaussian {
         let dot = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2];
         let lobe: Vec3 = std::array::from_fn(|i| h[i] * (2.0 * dot) - wi[i]);
         let lobe_ok = dot.gt(0.0) & lobe[2].gt(MIN_COS) & lobe[2].finite();
-        let lobe = [
+        let mut lobe = [
             lobe_ok.select(lobe[0], 0.0),
             lobe_ok.select(lobe[1], 0.0),
             lobe_ok.select(lobe[2], -1.0),
         ];
+        if let (Some((twin, _)), Some(use_twin)) = (&st.twin, use_twin) {
+            let d = twin.direction(b1, b2);
+            lobe = std::array::from_fn(|i| use_twin.select(d[i], lobe[i]));
+        }
         let cos_dir = cosine_direction_program(b, u1, u2);
         let z = (1.0 - u1).max(2.0 * MIN_COS);
         let ring = (1.0 - z * z).max(0.0).sqrt();
@@ -845,11 +978,151 @@ fn rgb_from_table<'a>(
         }
     } else {
         let kernel: Vec<Value> = v.iter().map(|&l| (l + ln_scale).exp()).collect();
-        shading
-            .rgb_rule
-            .integrate_program(b, shading.fresnel, pair.cos_half, &kernel)
+        weighted_sum(b, shading, pair.cos_half, &kernel)
     };
     rgb.map(|c| inside.select(c, 0.0))
+}
+
+/// The RGB rule's Fresnel-weighted sum of `values` (the nodes') at `cos`,
+/// as `RgbRule::integrate_program`. For a metal's folded weights w_jc(cos)
+/// (257 cosine rows, linear between them) in their low-rank form: with the
+/// rows' singular vectors, w_jc(cos) = sum_p phi_p(cos) A_pjc to 1e-6 of
+/// the largest weight in P ~ 6 terms (the rows of every metal are nearly
+/// combinations of a few cosine profiles), so the sum is sum_p phi_p(cos)
+/// (sum_j values_j A_pjc): 2 P gathers of phi instead of 6 N of the
+/// weights.
+fn weighted_sum<'a>(
+    b: &'a Builder,
+    shading: &Shading,
+    cos: Value<'a>,
+    values: &[Value<'a>],
+) -> [Value<'a>; 3] {
+    let rule = shading.rgb_rule;
+    let fresnel = shading.fresnel;
+    if fresnel.is_spectrally_flat() {
+        return rule.integrate_program(b, fresnel, cos, values);
+    }
+    let (bins, rows) = rule.export_weights(fresnel);
+    let n = rule.len();
+    let Some((phi, a)) = low_rank(&rows, bins + 1, 3 * n, 1e-6) else {
+        return rule.integrate_program(b, fresnel, cos, values);
+    };
+    let rank = a.len();
+    let table = b.table(phi.iter().map(|&v| v as f32).collect());
+    let cos = cos.finite().select(cos, 0.0);
+    let t = cos.clamp(0.0, 1.0) * bins as f64;
+    let row = t.floor().min((bins - 1) as f64);
+    let frac = t - row;
+    let base = row * rank as f64;
+    let profile: Vec<Value> = (0..rank)
+        .map(|p| {
+            let lo = b.gather(table, base + p as f64);
+            let hi = b.gather(table, base + (rank + p) as f64);
+            lo + (hi - lo) * frac
+        })
+        .collect();
+    std::array::from_fn(|c| {
+        let per_rank = (0..rank).map(|p| {
+            let mut acc = values[0] * a[p][c];
+            for (j, &v) in values.iter().enumerate().skip(1) {
+                acc = v.fma(a[p][3 * j + c], acc);
+            }
+            acc * profile[p]
+        });
+        per_rank.reduce(|x, y| x + y).unwrap_or_else(|| b.c(0.0))
+    })
+}
+
+/// The rank-P form of a `rows` x `cols` matrix given as rows of triples
+/// (cols = 3 per triple): phi (rows x P, row-major) and A (P rows of cols)
+/// with |M - phi A| <= `tolerance` max |M| everywhere, P the smallest such
+/// (from the eigenvectors of M^T M by cyclic Jacobi); None when no P <=
+/// cols / 2 reaches it.
+fn low_rank(
+    m: &[[f64; 3]],
+    rows: usize,
+    cols: usize,
+    tolerance: f64,
+) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+    let flat: Vec<f64> = m.iter().flatten().copied().collect();
+    if flat.len() != rows * cols || cols == 0 {
+        return None;
+    }
+    let at = |r: usize, c: usize| flat[r * cols + c];
+    let largest = flat.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    // Gram matrix and its eigenvectors.
+    let mut g = vec![vec![0.0; cols]; cols];
+    for row in flat.chunks_exact(cols) {
+        for (gi, &ri) in g.iter_mut().zip(row) {
+            for (gij, &rj) in gi.iter_mut().zip(row) {
+                *gij += ri * rj;
+            }
+        }
+    }
+    let mut v: Vec<Vec<f64>> = (0..cols)
+        .map(|i| (0..cols).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+        .collect();
+    for _ in 0..60 {
+        let mut off = 0.0;
+        for p in 0..cols {
+            for q in p + 1..cols {
+                off += g[p][q] * g[p][q];
+                if g[p][q].abs() < 1e-300 {
+                    continue;
+                }
+                let theta = (g[q][q] - g[p][p]) / (2.0 * g[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
+                for gk in g.iter_mut() {
+                    let (gkp, gkq) = (gk[p], gk[q]);
+                    gk[p] = c * gkp - s * gkq;
+                    gk[q] = s * gkp + c * gkq;
+                }
+                let (head, tail) = g.split_at_mut(q);
+                for (gpk, gqk) in head[p].iter_mut().zip(tail[0].iter_mut()) {
+                    let (x, y) = (*gpk, *gqk);
+                    *gpk = c * x - s * y;
+                    *gqk = s * x + c * y;
+                }
+                for row in v.iter_mut() {
+                    let (vp, vq) = (row[p], row[q]);
+                    row[p] = c * vp - s * vq;
+                    row[q] = s * vp + c * vq;
+                }
+            }
+        }
+        if off < 1e-30 * largest.powi(4) {
+            break;
+        }
+    }
+    let mut order: Vec<usize> = (0..cols).collect();
+    order.sort_by(|&x, &y| g[y][y].total_cmp(&g[x][x]));
+    for rank in 1..=cols / 2 {
+        let basis: Vec<Vec<f64>> = order[..rank]
+            .iter()
+            .map(|&e| (0..cols).map(|i| v[i][e]).collect())
+            .collect();
+        let phi: Vec<f64> = (0..rows)
+            .flat_map(|r| {
+                basis
+                    .iter()
+                    .map(|u| (0..cols).map(|i| at(r, i) * u[i]).sum::<f64>())
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        let worst = (0..rows)
+            .flat_map(|r| (0..cols).map(move |c| (r, c)))
+            .map(|(r, c)| {
+                let approx: f64 = (0..rank).map(|p| phi[r * rank + p] * basis[p][c]).sum();
+                (approx - at(r, c)).abs()
+            })
+            .fold(0.0, f64::max);
+        if worst <= tolerance * largest {
+            return Some((phi, basis));
+        }
+    }
+    None
 }
 
 #[cfg(test)]

@@ -51,6 +51,10 @@
 mod orders;
 pub mod params;
 mod program;
+mod program_rgb;
+mod program_sampling;
+#[cfg(test)]
+mod program_tests;
 mod sampling;
 #[cfg(test)]
 mod tests;

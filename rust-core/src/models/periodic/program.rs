@@ -1,7 +1,367 @@
 //! The periodic model's programs for tracing renderers (crate::program,
 //! docs/jit.md): the same physics as its native path, as array operations.
+//!
+//! - The kernel (`kernel_program_at`): the orders near the peak of the
+//!   evaluated (u, v), as `PeriodicSurface::kernel` picks them (at most
+//!   three: unrolled to the material's largest count, masked), their powers
+//!   |c_n|^2 from the closed form (rect) or the material's own quintic
+//!   Hermite table of c_n (sine, tabulated), exported here.
+//! - RGB (`reflectance_rgb_program`, program_rgb.rs): each order's peak
+//!   integrated against the matching functions as `kernel_rgb_with` does.
+//! - Sampling (program_sampling.rs): the orders' lobes of sampling.rs.
+//! - No coherent lobe (order 0 is a Gaussian lobe like the others): the
+//!   trait's zero defaults are the native values.
 
-use super::Periodic;
-use crate::models::SurfacePrograms;
+use super::{Model, Periodic, PeriodicSurface, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT};
+use crate::models::{SampleProgram, Shading, SurfacePrograms};
+use crate::optics::program::{PairProgram, Vec3};
+use crate::program::{Builder, Mask, Table, Value};
+use std::f64::consts::PI;
 
-impl SurfacePrograms for Periodic {}
+/// |c_n(beta)|^2 as program operations: the closed form of the rect
+/// profile, or the material's table of c_n interpolated as natively
+/// (`OrderTable::power`: quintic Hermite in beta).
+pub(super) enum PowerProgram {
+    Rect {
+        height_um: f64,
+        fill: f64,
+        /// sinc^2(n d / Lam) for n = 0..len (the native table).
+        sinc2: Table,
+    },
+    Table {
+        /// Per (beta sample, order): [c, h dc/dbeta, h^2/2 d2c/dbeta2],
+        /// real parts only (sine) or (re, im) interleaved (tabulated).
+        data: Table,
+        step: f64,
+        n_beta: usize,
+        n_lo: i64,
+        n_hi: i64,
+        symmetric: bool,
+        complex: bool,
+    },
+}
+
+/// What the powers at one beta share: the rect profile's sin^2(beta h / 2),
+/// or the table's row and Hermite weights.
+pub(super) enum PowerAt<'a> {
+    Rect {
+        s2: Value<'a>,
+    },
+    Table {
+        /// Index of the row's first entry, and the Hermite weights (h1, h2,
+        /// h4, h5 without their powers of the step: the table holds them).
+        row: Value<'a>,
+        h: [Value<'a>; 6],
+        inside: Mask<'a>,
+    },
+}
+
+impl PowerProgram {
+    pub(super) fn new(b: &Builder, surface: &PeriodicSurface) -> PowerProgram {
+        match &surface.model {
+            Model::Rect {
+                height_um,
+                fill,
+                sinc2,
+            } => PowerProgram::Rect {
+                height_um: *height_um,
+                fill: *fill,
+                sinc2: b.table(sinc2.iter().map(|&v| v as f32).collect()),
+            },
+            Model::Table(t) => {
+                let complex = !t.symmetric;
+                let h = t.step;
+                let scale = [1.0, h, 0.5 * h * h];
+                let data = t
+                    .data
+                    .iter()
+                    .flat_map(|e| {
+                        (0..3).flat_map(move |m| {
+                            let c = e[m] * scale[m];
+                            if complex {
+                                vec![c.re as f32, c.im as f32]
+                            } else {
+                                vec![c.re as f32]
+                            }
+                        })
+                    })
+                    .collect();
+                PowerProgram::Table {
+                    data: b.table(data),
+                    step: t.step,
+                    n_beta: t.n_beta,
+                    n_lo: t.n_lo,
+                    n_hi: t.n_hi,
+                    symmetric: t.symmetric,
+                    complex,
+                }
+            }
+        }
+    }
+
+    /// The shared part at beta = k w <= 0 (in the table's range for an
+    /// in-band wavelength).
+    pub(super) fn at<'a>(&self, b: &'a Builder, beta: Value<'a>) -> PowerAt<'a> {
+        match self {
+            PowerProgram::Rect { height_um, .. } => {
+                let s = (beta * (0.5 * height_um)).sin();
+                PowerAt::Rect { s2: s * s }
+            }
+            PowerProgram::Table {
+                step,
+                n_beta,
+                n_lo,
+                n_hi,
+                complex,
+                ..
+            } => {
+                let pos = (beta + BETA_MAX) * (1.0 / step);
+                let inside = pos.ge(0.0) & pos.le((*n_beta - 1) as f64);
+                let pos = inside.select(pos, 0.0);
+                let j = pos.floor().min((*n_beta - 2) as f64);
+                let t = pos - j;
+                let t2 = t * t;
+                let t3 = t2 * t;
+                let t4 = t3 * t;
+                let t5 = t4 * t;
+                let h = [
+                    1.0 - t3 * 10.0 + t4 * 15.0 - t5 * 6.0,
+                    t - t3 * 6.0 + t4 * 8.0 - t5 * 3.0,
+                    t2 - t3 * 3.0 + t4 * 3.0 - t5,
+                    t3 * 10.0 - t4 * 15.0 + t5 * 6.0,
+                    t3 * -4.0 + t4 * 7.0 - t5 * 3.0,
+                    t3 - t4 * 2.0 + t5,
+                ];
+                let stride = (n_hi - n_lo + 1) as f64 * if *complex { 6.0 } else { 3.0 };
+                let _ = b;
+                PowerAt::Table {
+                    row: j * stride,
+                    h,
+                    inside,
+                }
+            }
+        }
+    }
+
+    /// `power` for an order known when the program is built.
+    pub(super) fn power_const<'a>(&self, b: &'a Builder, at: &PowerAt<'a>, n: i64) -> Value<'a> {
+        match (self, at) {
+            (PowerProgram::Rect { fill, .. }, PowerAt::Rect { s2 }) => {
+                let (c0, c1) = if n == 0 {
+                    (1.0, -4.0 * fill * (1.0 - fill))
+                } else {
+                    let x = PI * n as f64 * fill;
+                    (0.0, 4.0 * fill * fill * (x.sin() / x).powi(2))
+                };
+                (*s2 * c1 + c0).max(0.0)
+            }
+            _ => self.power(b, at, b.c(n as f64)),
+        }
+    }
+
+    /// |c_n|^2 at the prepared beta for order n (an integer-valued
+    /// register); 0 for orders the native table filtered out.
+    pub(super) fn power<'a>(&self, b: &'a Builder, at: &PowerAt<'a>, n: Value<'a>) -> Value<'a> {
+        match (self, at) {
+            (PowerProgram::Rect { fill, sinc2, .. }, PowerAt::Rect { s2 }) => {
+                let zero = (1.0 - *s2 * (4.0 * fill * (1.0 - fill))).max(0.0);
+                let other = *s2 * (4.0 * fill * fill) * b.gather(*sinc2, n.abs());
+                n.eq(0.0).select(zero, other)
+            }
+            (
+                PowerProgram::Table {
+                    data,
+                    n_lo,
+                    n_hi,
+                    symmetric,
+                    complex,
+                    ..
+                },
+                PowerAt::Table { row, h, inside },
+            ) => {
+                let col = if *symmetric { n.abs() } else { n } - *n_lo as f64;
+                let known = col.ge(0.0) & col.le((n_hi - n_lo) as f64) & *inside;
+                let width = if *complex { 6.0 } else { 3.0 };
+                let stride = (n_hi - n_lo + 1) as f64 * width;
+                let at = *row + col.clamp(0.0, (n_hi - n_lo) as f64) * width;
+                let part = |offset: f64| -> Value<'a> {
+                    let g = |m: f64| b.gather(*data, at + (offset + m));
+                    let step = if *complex { 2.0 } else { 1.0 };
+                    let next = stride + offset;
+                    let gn = |m: f64| b.gather(*data, at + (next + m));
+                    g(0.0) * h[0]
+                        + g(step) * h[1]
+                        + g(2.0 * step) * h[2]
+                        + gn(0.0) * h[3]
+                        + gn(step) * h[4]
+                        + gn(2.0 * step) * h[5]
+                };
+                let re = part(0.0);
+                let p = if *complex {
+                    let im = part(1.0);
+                    re * re + im * im
+                } else {
+                    re * re
+                };
+                known.select(p, 0.0)
+            }
+            _ => unreachable!("a power prepared for another profile"),
+        }
+    }
+}
+
+/// a + b = s + e exactly (Knuth's two-sum; f32 in a renderer).
+pub(super) fn two_sum<'a>(a: Value<'a>, b: Value<'a>) -> (Value<'a>, Value<'a>) {
+    let s = a + b;
+    let bb = s - a;
+    let e = (a - (s - bb)) + (b - bb);
+    (s, e)
+}
+
+/// (x^2 + y^2 + z^2) - 1 of a direction that is unit to f32 rounding, to
+/// about 1e-14: the products' rounding errors by FMA, the sums by two-sum.
+fn norm_excess<'a>(d: &Vec3<'a>) -> Value<'a> {
+    let sq = |x: Value<'a>| {
+        let h = x * x;
+        (h, x.fma(x, -h))
+    };
+    let ((hx, lx), (hy, ly), (hz, lz)) = (sq(d[0]), sq(d[1]), sq(d[2]));
+    let (s1, e1) = two_sum(hx, hy);
+    let (s2, e2) = two_sum(s1, hz);
+    (s2 - 1.0) + (e1 + e2 + lx + ly + lz)
+}
+
+/// u and v of the pair as the native path computes them in f64 from the
+/// caller's f32 directions (normalised there in f64): each as hi + lo, the
+/// sum exact by two-sum and the normalisation's first-order change -d
+/// (|d|^2 - 1) / 2 carried in lo. A grating's narrow peaks move by their
+/// whole width per 1e-6 of u at high orders and long coherence (the
+/// compact disc's: u to 6e-8 keeps f to 1e-4 on the flank of order 13);
+/// the single rounding of -(wi.x + wo.x) would cost 3e-4 there.
+fn exact_uv<'a>(pair: &PairProgram<'a>) -> [(Value<'a>, Value<'a>); 2] {
+    let (di, d_o) = (norm_excess(&pair.wi), norm_excess(&pair.wo));
+    std::array::from_fn(|c| {
+        let (hi, lo) = two_sum(-pair.wi[c], -pair.wo[c]);
+        let shrink = (pair.wi[c] * di + pair.wo[c] * d_o) * 0.5;
+        (hi, lo + shrink)
+    })
+}
+
+impl PeriodicSurface {
+    /// The most orders `orders_near` can return: an interval of length
+    /// 2 reach holds at most floor(2 reach) + 1 integers.
+    pub(super) fn max_orders_near(&self) -> usize {
+        let scale = 2.0 * PI * self.coherence_um / self.period_um;
+        let e_min_max = (0.5 * scale).powi(2);
+        let reach = (e_min_max + KERNEL_TAIL_EXPONENT).min(EXP_UNDERFLOW).sqrt() / scale;
+        (2.0 * reach).floor() as usize + 1
+    }
+
+    /// `kernel` as program operations, at wavenumber k taken from lambda
+    /// (nm): the orders of `orders_near`, each order's Gaussian exponent
+    /// from u P - n lambda (P the period in nm) with the product's rounding
+    /// error carried, so that the distance to a narrow peak keeps f32's
+    /// relative precision at high orders.
+    pub(super) fn kernel_program<'a>(
+        &self,
+        b: &'a Builder,
+        powers: &PowerProgram,
+        pair: &PairProgram<'a>,
+        k: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> Value<'a> {
+        let w = pair.w;
+        let l = self.coherence_um;
+        let period_nm = 1000.0 * self.period_um;
+        let p_hi = period_nm as f32 as f64;
+        let p_lo = period_nm - p_hi;
+        // u = u_hi + u_lo as the native path has it (see `exact_uv`), and
+        // u P = p + p_err up to the rounding of the small terms.
+        let [(u, u_lo), (v, v_lo)] = exact_uv(pair);
+        let p = u * p_hi;
+        let p_err = u.fma(p_hi, -p) + u_lo * p_hi + u * p_lo;
+        let inv_lambda = 1.0 / lambda_nm;
+        let x = (p + p_err) * inv_lambda;
+        // orders_near: e_min of the nearest order, reach around x.
+        let scale = 2.0 * PI * l / self.period_um;
+        let frac = x - (x + 0.5).floor();
+        let e_min = (frac * scale).sq();
+        let reach = (e_min + KERNEL_TAIL_EXPONENT).min(EXP_UNDERFLOW).sqrt() * (1.0 / scale);
+        let lo = -(reach - x).floor(); // ceil(x - reach)
+        let hi = (x + reach).floor();
+        let e_v = (k * (v + v_lo) * l).sq();
+        // l (k u - 2 pi n / Lam) = A (u P - n lambda) / lambda.
+        let a = 2000.0 * PI * l / period_nm;
+        let beta = k * w;
+        let at = powers.at(b, beta);
+        let mut sum = b.c(0.0);
+        for i in 0..self.max_orders_near() {
+            let n = lo + i as f64;
+            let d = (n.fma(-lambda_nm, p) + p_err) * inv_lambda * a;
+            let e = d.fma(d, e_v);
+            let term = powers.power(b, &at, n) * (-e).exp();
+            let take = n.le(hi) & e.lt(EXP_UNDERFLOW);
+            sum = sum + take.select(term, 0.0);
+        }
+        let kernel = (k * l / w).sq() * (1.0 / PI) * sum;
+        let ok = k.gt(0.0) & w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
+        ok.select(kernel.finite_non_negative(), 0.0)
+    }
+}
+
+impl SurfacePrograms for Periodic {
+    fn kernel_program<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        k_per_um: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let lambda_nm = (2000.0 * PI) / k_per_um;
+        self.kernel_program_at(b, pair, k_per_um, lambda_nm)
+    }
+
+    fn kernel_program_at<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        k_per_um: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let powers = PowerProgram::new(b, &self.surface);
+        Some(
+            self.surface
+                .kernel_program(b, &powers, pair, k_per_um, lambda_nm),
+        )
+    }
+
+    fn reflectance_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        pair: &PairProgram<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        self.rgb_program(b, shading, pair)
+    }
+
+    fn sample_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        wi: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+        u: [Value<'a>; 3],
+    ) -> Option<SampleProgram<'a>> {
+        self.sampling_program(b, shading, wi, lambda_nm, u)
+    }
+
+    fn pdf_program<'a>(
+        &self,
+        b: &'a Builder,
+        shading: &Shading,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        self.density_program(b, shading, wi, wo, lambda_nm)
+    }
+}

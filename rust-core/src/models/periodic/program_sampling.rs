@@ -1,0 +1,483 @@
+//! The sampling programs of gratings (see program.rs): the orders' lobes of
+//! sampling.rs with exact per-wi order weights instead of the grating
+//! table's cells (a program cannot build tables per incident direction;
+//! the weights only steer the sampling, the pdf is exact for whatever
+//! weights).
+//!
+//! One wavelength: order n (centre u_n = n lambda / Lam inside the disk)
+//! with probability ~ |c_n(k w_n)|^2 min(G / w^2, 50) at its centre
+//! direction (moved onto the rim cos 0.1 where it is more grazing, as
+//! `order_weight`), then an isotropic Gaussian of sd 1 / (sqrt 2 k l) in
+//! (u, v) (Box-Muller); 10% defensive (half cosine, half uniform), as the
+//! native mixture.
+//!
+//! RGB: the native rainbow, simplified to what a program can invert. Order
+//! n != 0 runs along u = n lambda / Lam: lambda from the band density
+//! (piecewise linear over 9 nodes 50 nm apart, 0 at the band's ends)
+//! tilted by exp(kappa c) in the band's CDF c towards the end where the
+//! order's weight is larger (its rim end: G grows there), u exactly on the
+//! rainbow, v Gaussian of sd sigma(lambda); where the rainbow leaves the
+//! disk the sample fails. The order's probability ~ its weight at the
+//! middle of the wavelengths where its centre is inside the disk times
+//! their band mass. Order 0 (the mirror lobe at every wavelength):
+//! isotropic Gaussians at the interior nodes, weighted by the band's mass
+//! around them. The density in (u, v) is closed form and continuous (the
+//! chi-square test's cubature integrates it): sum over orders of P_n
+//! rho(lambda) tilt(lambda) Lam / |n| N(v; sigma(lambda)) at lambda = Lam u
+//! / n, plus order 0's Gaussians. (Restricting lambda to the interval cut
+//! the density off where the lobes still reach the rim: 100x the variance;
+//! the tilt took the compact disc's variance at cos_i 0.5 from 3.6x to
+//! ~1.8x the core's, measured in program_tests.rs.)
+
+use super::program::PowerProgram;
+use super::Periodic;
+use crate::models::{SampleProgram, Shading};
+use crate::optics::geometry::MIN_COS;
+use crate::optics::program::Vec3;
+use crate::program::{Builder, Mask, Table, Value};
+use crate::sampling::{band_density, DEFENSIVE_FRACTION, RGB_BAND_NM};
+use std::f64::consts::{PI, SQRT_2};
+use std::sync::OnceLock;
+
+/// Cap of G / w^2 in the order weights, and the rim cosine of their
+/// directions (sampling.rs).
+const GW2_CAP: f64 = 50.0;
+const RIM_COS: f64 = 0.1;
+/// The band density's bins (RGB mode).
+const BINS: usize = 8;
+/// The wavelength tilt's weights are taken this fraction of the interval
+/// inside its ends; its exponent is clamped to +-TILT_MAX (a density ratio
+/// of e^8 between the ends).
+const TILT_INSET: f64 = 0.01;
+const TILT_MAX: f64 = 8.0;
+/// The most orders a sampling program unrolls (periods up to ~100 um).
+pub const MAX_SAMPLING_ORDERS: usize = 512;
+
+/// The band density at the nodes lo + i (hi - lo) / BINS, i = 0..=BINS,
+/// 0 at the ends, normalised so that its piecewise-linear interpolant
+/// integrates to 1.
+fn band_nodes() -> &'static [f64; BINS + 1] {
+    static NODES: OnceLock<[f64; BINS + 1]> = OnceLock::new();
+    NODES.get_or_init(|| {
+        let (lo, hi) = RGB_BAND_NM;
+        let width = (hi - lo) / BINS as f64;
+        let y: [f64; BINS + 1] = std::array::from_fn(|i| {
+            if i == 0 || i == BINS {
+                0.0
+            } else {
+                band_density(lo + width * i as f64)
+            }
+        });
+        let total: f64 = y.windows(2).map(|w| 0.5 * width * (w[0] + w[1])).sum();
+        y.map(|v| v / total)
+    })
+}
+
+/// The band's CDF at the nodes.
+fn band_cdf_nodes() -> [f64; BINS + 1] {
+    let (lo, hi) = RGB_BAND_NM;
+    let width = (hi - lo) / BINS as f64;
+    let y = band_nodes();
+    let mut c = [0.0; BINS + 1];
+    for i in 0..BINS {
+        c[i + 1] = c[i] + 0.5 * width * (y[i] + y[i + 1]);
+    }
+    c
+}
+
+/// Masses of the order-0 Gaussians: the band's mass around each interior
+/// node (half of each neighbouring segment), at the node's wavelength.
+fn zero_order_nodes() -> Vec<(f64, f64)> {
+    let (lo, hi) = RGB_BAND_NM;
+    let width = (hi - lo) / BINS as f64;
+    let y = band_nodes();
+    let nodes: Vec<(f64, f64)> = (1..BINS)
+        .map(|i| {
+            let left = 0.5 * width * (0.75 * y[i] + 0.25 * y[i - 1]);
+            let right = 0.5 * width * (0.75 * y[i] + 0.25 * y[i + 1]);
+            (lo + width * i as f64, left + right)
+        })
+        .collect();
+    let total: f64 = nodes.iter().map(|n| n.1).sum();
+    nodes.into_iter().map(|(l, m)| (l, m / total)).collect()
+}
+
+/// What the sampling programs of one material and mode share.
+struct Orders<'a> {
+    /// Orders first..first + count (unrolled, masked by `take`).
+    n: Vec<Value<'a>>,
+    take: Vec<Mask<'a>>,
+    /// Unnormalised probabilities (0 where not taken) and their sum.
+    weight: Vec<Value<'a>>,
+    total: Value<'a>,
+    /// RGB: whether the entry is order 0 (the mirror lobe), the band mass
+    /// of the wavelengths where the order's centre is inside the disk, and
+    /// its tilt kappa.
+    zero: Vec<bool>,
+    band: Vec<[Value<'a>; 2]>,
+}
+
+impl Periodic {
+    /// Orders whose centre can be inside the disk: |u_n| <= 2 at the
+    /// shortest wavelength.
+    fn sampling_order_count(&self, lambda_min_nm: f64) -> Option<usize> {
+        let count = (2.0 * 1000.0 * self.surface.period_um / lambda_min_nm).floor() as usize + 2;
+        (count <= MAX_SAMPLING_ORDERS).then_some(count)
+    }
+
+    /// `order_weight` of sampling.rs at the centre (u_n, 0) of order n for
+    /// wi at lambda (nm), the direction moved onto the rim.
+    fn order_weight_program<'a>(
+        &self,
+        b: &'a Builder,
+        powers: &PowerProgram,
+        wi: Vec3<'a>,
+        n: Value<'a>,
+        lambda: Value<'a>,
+    ) -> Value<'a> {
+        let period_nm = 1000.0 * self.surface.period_um;
+        let u_n = n * lambda * (1.0 / period_nm);
+        let (x, y) = (-wi[0] - u_n, -wi[1]);
+        let r = (x * x + y * y).sqrt();
+        let r_max = (1.0 - RIM_COS * RIM_COS).sqrt();
+        let shrink = r.gt(r_max).select(r_max / r, 1.0);
+        let (x, y) = (x * shrink, y * shrink);
+        let z = (1.0 - x * x - y * y).max(0.0).sqrt();
+        let one_plus_dot = wi[0] * x + wi[1] * y + wi[2] * z + 1.0;
+        let w = wi[2] + z;
+        let gw2 = (one_plus_dot * one_plus_dot / (wi[2] * z * w * w)).min(GW2_CAP);
+        let beta = -(2000.0 * PI) * w / lambda;
+        let weight = powers.power_rgb(b, beta, n) * gw2;
+        weight.finite_non_negative()
+    }
+
+    /// sigma(lambda) of an order's Gaussian in u and v: 1 / (sqrt 2 k l).
+    fn sigma<'a>(&self, lambda: Value<'a>) -> Value<'a> {
+        lambda * (1.0 / (2000.0 * PI * SQRT_2 * self.surface.coherence_um))
+    }
+
+    /// The orders, their probabilities and (RGB) band intervals at wi.
+    fn orders<'a>(
+        &self,
+        b: &'a Builder,
+        powers: &PowerProgram,
+        wi: Vec3<'a>,
+        lambda: Option<Value<'a>>,
+    ) -> Option<Orders<'a>> {
+        let period_nm = 1000.0 * self.surface.period_um;
+        let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
+        let mut out = Orders {
+            n: Vec::new(),
+            take: Vec::new(),
+            weight: Vec::new(),
+            total: b.c(0.0),
+            zero: Vec::new(),
+            band: Vec::new(),
+        };
+        match lambda {
+            Some(lambda) => {
+                let count = self.sampling_order_count(crate::spectrum::LAMBDA_MIN_NM)?;
+                // Centres inside the disk: |-wi.x - n du| < half.
+                let du = lambda * (1.0 / period_nm);
+                let first = -((wi[0] + half) / du).floor(); // ceil((-wi.x - half) / du)
+                let last = ((half - wi[0]) / du).floor();
+                for i in 0..count {
+                    let n = first + i as f64;
+                    let take = n.le(last);
+                    let w = take.select(self.order_weight_program(b, powers, wi, n, lambda), 0.0);
+                    out.total = out.total + w;
+                    out.n.push(n);
+                    out.take.push(take);
+                    out.weight.push(w);
+                }
+            }
+            None => {
+                let (lo, hi) = RGB_BAND_NM;
+                let count = self.sampling_order_count(lo)?;
+                // Orders n != 0 whose centre is inside the disk for some
+                // lambda of the band: n lambda / P in (a, b).
+                let (a, bb) = (-wi[0] - half, -wi[0] + half);
+                let (a_lo, a_hi) = (a * (period_nm / lo), a * (period_nm / hi));
+                let (b_lo, b_hi) = (bb * (period_nm / lo), bb * (period_nm / hi));
+                let first = -(-a_lo.min(a_hi)).floor(); // ceil
+                let last = b_lo.max(b_hi).floor();
+                let mut entries: Vec<(Value<'a>, Mask<'a>, bool)> = (0..count)
+                    .map(|i| {
+                        let n = first + i as f64;
+                        (n, n.le(last) & !n.eq(0.0), false)
+                    })
+                    .collect();
+                // Order 0, always (the mirror lobe).
+                entries.push((b.c(0.0), b.always(), true));
+                for (nv, in_range, zero) in entries {
+                    let (la, lb) = if zero {
+                        (b.c(lo), b.c(hi))
+                    } else {
+                        // lambda where -wi.x - n lambda / P is within half.
+                        let inv_n = 1.0 / in_range.select(nv, 1.0);
+                        let (p, q) = (a * period_nm * inv_n, bb * period_nm * inv_n);
+                        (p.min(q).max(lo), p.max(q).min(hi))
+                    };
+                    let mass = (band_cdf(b, lb) - band_cdf(b, la)).max(0.0);
+                    let mid = (la + lb) * 0.5;
+                    let w = self.order_weight_program(b, powers, wi, nv, mid) * mass;
+                    // Tilt of the wavelength density towards the end of the
+                    // interval with the larger weight (the rim, where G
+                    // grows): exp(kappa c) in the band's CDF c.
+                    let kappa = if zero {
+                        b.c(0.0)
+                    } else {
+                        let e = (lb - la) * TILT_INSET;
+                        let qa = self.order_weight_program(b, powers, wi, nv, la + e);
+                        let qb = self.order_weight_program(b, powers, wi, nv, lb - e);
+                        let k = ((qb + 1e-30) / (qa + 1e-30))
+                            .ln()
+                            .clamp(-TILT_MAX, TILT_MAX);
+                        k.finite().select(k, 0.0)
+                    };
+                    let take = in_range & la.lt(lb) & mass.gt(0.0);
+                    let w = take.select(w, 0.0);
+                    out.total = out.total + w;
+                    out.n.push(nv);
+                    out.take.push(take);
+                    out.weight.push(w);
+                    out.zero.push(zero);
+                    out.band.push([mass, kappa]);
+                }
+            }
+        }
+        Some(out)
+    }
+
+    pub(super) fn sampling_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        wi: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+        u: [Value<'a>; 3],
+    ) -> Option<SampleProgram<'a>> {
+        let powers = PowerProgram::new(b, &self.surface);
+        let orders = self.orders(b, &powers, wi, lambda_nm)?;
+        let lobe_ok = orders.total.gt(0.0) & orders.total.finite();
+        let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
+        // Uniforms outside [0, 1] (or NaN) are clamped (NaN to 0).
+        let u = u.map(|x| x.finite().select(x, 0.0).clamp(0.0, 1.0));
+        let u0 = u[0];
+        let defensive = u0.lt(p_def);
+        // Defensive: half cosine, half uniform.
+        let d = u0 / p_def;
+        let cosine = crate::sampling::program::cosine_direction_program(b, u[1], u[2]);
+        let uniform = uniform_direction_program(u[1], u[2]);
+        let def_dir: Vec3 = std::array::from_fn(|c| d.lt(0.5).select(cosine[c], uniform[c]));
+        // The lobe: an order by its probability, from the rest of u0.
+        let t = ((u0 - p_def) / (1.0 - p_def)).clamp(0.0, 1.0) * orders.total;
+        let mut acc = b.c(0.0);
+        let mut chosen = orders.n[0];
+        let mut below = b.c(0.0); // cumulative weight before the chosen
+        let mut chosen_w = orders.weight[0];
+        let mut found = t.lt(0.0);
+        let mut band = orders.band.first().copied();
+        for (i, (&n, &w)) in orders.n.iter().zip(&orders.weight).enumerate() {
+            let next = acc + w;
+            let here = !found & t.lt(next) & w.gt(0.0);
+            chosen = here.select(n, chosen);
+            below = here.select(acc, below);
+            chosen_w = here.select(w, chosen_w);
+            if let (Some(bd), Some(cur)) = (orders.band.get(i), band.as_mut()) {
+                *cur = std::array::from_fn(|k| here.select(bd[k], cur[k]));
+            }
+            found = found | here;
+            acc = next;
+        }
+        // Within the chosen order, the rest of u0 (RGB: the wavelength).
+        let r = ((t - below) / chosen_w).clamp(0.0, 1.0);
+        // Box-Muller pair.
+        let radius = (-(1.0 - u[1].clamp(0.0, 1.0)).max(1e-30).ln() * 2.0).sqrt();
+        let phi = u[2] * (2.0 * PI);
+        let (g1, g2) = (radius * phi.cos(), radius * phi.sin());
+        let period_nm = 1000.0 * self.surface.period_um;
+        let (du, dv) = match lambda_nm {
+            Some(lambda) => {
+                let sigma = self.sigma(lambda);
+                (chosen * lambda * (1.0 / period_nm) + sigma * g1, sigma * g2)
+            }
+            None => {
+                let [_, kappa] = band.expect("RGB orders carry their bands");
+                let small = kappa.abs().lt(1e-3);
+                let kk = small.select(1.0, kappa);
+                let tilted = ((kk.exp() - 1.0) * r + 1.0).ln() / kk;
+                let lambda = band_inverse_cdf(b, small.select(r, tilted.clamp(0.0, 1.0)));
+                let sigma = self.sigma(lambda);
+                // Order 0: a Gaussian at an interior node, picked by r.
+                let sigma0 = self.sigma(zero_order_node(b, r));
+                let zero = chosen.eq(0.0);
+                (
+                    zero.select(sigma0 * g1, chosen * lambda * (1.0 / period_nm)),
+                    zero.select(sigma0 * g2, sigma * g1),
+                )
+            }
+        };
+        let (x, y) = (-wi[0] - du, -wi[1] - dv);
+        let r2 = x * x + y * y;
+        let z = (1.0 - r2).max(0.0).sqrt();
+        let lobe_ok_dir = r2.lt(1.0) & z.gt(MIN_COS);
+        let lobe_dir = [
+            lobe_ok_dir.select(x, 0.0),
+            lobe_ok_dir.select(y, 0.0),
+            lobe_ok_dir.select(z, -1.0),
+        ];
+        let wo = std::array::from_fn(|c| defensive.select(def_dir[c], lobe_dir[c]));
+        let never = b.always();
+        Some(SampleProgram {
+            wo,
+            coherent: !never,
+        })
+    }
+
+    pub(super) fn density_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+        lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        let powers = PowerProgram::new(b, &self.surface);
+        let orders = self.orders(b, &powers, wi, lambda_nm)?;
+        let lobe_ok = orders.total.gt(0.0) & orders.total.finite();
+        let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
+        let defensive = (wo[2] * (1.0 / PI) + 0.5 / PI) * 0.5;
+        let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
+        let period_nm = 1000.0 * self.surface.period_um;
+        let inv_total = 1.0 / orders.total;
+        let mut lobe = b.c(0.0);
+        match lambda_nm {
+            Some(lambda) => {
+                let sigma = self.sigma(lambda);
+                let inv2s2 = 0.5 / (sigma * sigma);
+                let du = lambda * (1.0 / period_nm);
+                for (&n, &w) in orders.n.iter().zip(&orders.weight) {
+                    let d = u - n * du;
+                    let e = (d * d + v * v) * inv2s2;
+                    lobe = lobe + w * (-e).exp();
+                }
+                lobe = lobe * inv2s2 * (1.0 / PI);
+            }
+            None => {
+                let nodes = b.table(band_nodes().map(|x| x as f32).to_vec());
+                let zero = zero_order_nodes();
+                for (((&n, &w), bd), &is_zero) in orders
+                    .n
+                    .iter()
+                    .zip(&orders.weight)
+                    .zip(&orders.band)
+                    .zip(&orders.zero)
+                {
+                    if !is_zero {
+                        // lambda on this order's rainbow at u (w = 0 where
+                        // the order is not taken, n = 0 among them).
+                        let [_, kappa] = *bd;
+                        let nn = n.eq(0.0).select(1.0, n);
+                        let lambda = u * period_nm / nn;
+                        let small = kappa.abs().lt(1e-3);
+                        let kk = small.select(1.0, kappa);
+                        let c = band_cdf(b, lambda);
+                        let tilt = small.select(1.0, kk * (kk * c).exp() / (kk.exp() - 1.0));
+                        let rho = band_density_program(b, nodes, lambda);
+                        let sigma = self.sigma(lambda.max(1.0));
+                        let nv =
+                            (-(v * v) / (sigma * sigma * 2.0)).exp() / (sigma * (2.0 * PI).sqrt());
+                        let term = w * rho * tilt * (period_nm / nn.abs()) * nv;
+                        lobe = lobe + w.gt(0.0).select(term, 0.0);
+                    } else {
+                        // Order 0: the nodes' Gaussians.
+                        let rho2 = u * u + v * v;
+                        let mut g = b.c(0.0);
+                        for &(centre, m) in &zero {
+                            let s = centre / (2000.0 * PI * SQRT_2 * self.surface.coherence_um);
+                            let inv2s2 = 0.5 / (s * s);
+                            g = g + (rho2 * -inv2s2).exp() * (m * inv2s2 / PI);
+                        }
+                        lobe = lobe + w * g;
+                    }
+                }
+            }
+        }
+        let lobe = lobe_ok.select(lobe * inv_total, 0.0);
+        let density = p_def * defensive + (1.0 - p_def) * lobe * wo[2];
+        Some(wo[2].gt(MIN_COS).select(density, 0.0))
+    }
+}
+
+/// `warps::uniform_direction` as program operations.
+fn uniform_direction_program<'a>(r1: Value<'a>, r2: Value<'a>) -> Vec3<'a> {
+    let z = (1.0 - r1).max(MIN_COS * 2.0);
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = r2 * (2.0 * PI);
+    [r * phi.cos(), r * phi.sin(), z]
+}
+
+/// The band density at lambda (piecewise linear, 0 outside the band).
+fn band_density_program<'a>(b: &'a Builder, nodes: Table, lambda: Value<'a>) -> Value<'a> {
+    let (lo, hi) = RGB_BAND_NM;
+    let per = BINS as f64 / (hi - lo);
+    let x = (lambda - lo) * per;
+    let inside = x.ge(0.0) & x.le(BINS as f64);
+    let x = inside.select(x, 0.0);
+    let i = x.floor().min((BINS - 1) as f64);
+    let f = x - i;
+    let (y0, y1) = (b.gather(nodes, i), b.gather(nodes, i + 1.0));
+    inside.select(y0 + (y1 - y0) * f, 0.0)
+}
+
+/// The band's CDF at lambda (0 below the band, 1 above).
+fn band_cdf<'a>(b: &'a Builder, lambda: Value<'a>) -> Value<'a> {
+    let (lo, hi) = RGB_BAND_NM;
+    let width = (hi - lo) / BINS as f64;
+    let x = ((lambda - lo) * (1.0 / width)).clamp(0.0, BINS as f64);
+    let i = x.floor().min((BINS - 1) as f64);
+    let f = (x - i) * width;
+    let cdf_t = b.table(band_cdf_nodes().map(|v| v as f32).to_vec());
+    let y_t = b.table(band_nodes().map(|v| v as f32).to_vec());
+    let (c0, y0, y1) = (b.gather(cdf_t, i), b.gather(y_t, i), b.gather(y_t, i + 1.0));
+    c0 + f * y0 + (y1 - y0) * f * f * (0.5 / width)
+}
+
+/// The wavelength where the band's CDF reaches c in [0, 1]: the segment,
+/// then the linear density's quadratic CDF inverted (as the native
+/// rainbow).
+fn band_inverse_cdf<'a>(b: &'a Builder, c: Value<'a>) -> Value<'a> {
+    let (lo, hi) = RGB_BAND_NM;
+    let width = (hi - lo) / BINS as f64;
+    let cdf = band_cdf_nodes();
+    let y = band_nodes();
+    let mut i = b.c(0.0);
+    for &ci in &cdf[1..BINS] {
+        i = c.ge(ci).select(i + 1.0, i);
+    }
+    let cdf_t = b.table(cdf.map(|x| x as f32).to_vec());
+    let y_t = b.table(y.map(|x| x as f32).to_vec());
+    let (c0, y0, y1) = (b.gather(cdf_t, i), b.gather(y_t, i), b.gather(y_t, i + 1.0));
+    // y0 x + (y1 - y0) x^2 / (2 width) = c - c0, x in [0, width].
+    let target = (c - c0).max(0.0);
+    let disc = (y0 * y0 + (y1 - y0) * target * (2.0 / width)).max(0.0);
+    let denom = y0 + disc.sqrt();
+    let x = denom
+        .gt(0.0)
+        .select(target * 2.0 / denom, 0.0)
+        .clamp(0.0, width);
+    i * width + x + lo
+}
+
+/// The interior node whose cumulative order-0 mass holds r.
+fn zero_order_node<'a>(b: &'a Builder, r: Value<'a>) -> Value<'a> {
+    let nodes = zero_order_nodes();
+    let mut acc = 0.0;
+    let mut lambda = b.c(nodes[0].0);
+    for pair in nodes.windows(2) {
+        acc += pair[0].1;
+        lambda = r.ge(acc).select(pair[1].0, lambda);
+    }
+    lambda
+}

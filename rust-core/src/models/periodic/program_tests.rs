@@ -1,0 +1,666 @@
+//! The periodic model's programs against its native path (program.rs,
+//! program_rgb.rs, program_sampling.rs): through the exported arrays, run
+//! in f32 and f64 (crate::testing::programs).
+
+use crate::material::program::ProgramKind;
+use crate::testing::programs::{eval_spectral_errors, exported, pairs, round, run_both};
+use crate::Brdf;
+use glam::DVec3;
+use std::f64::consts::PI;
+
+/// The periodic materials of tests/materials.json.
+fn shared_materials() -> Vec<(String, String)> {
+    let text = include_str!("../../../../tests/materials.json");
+    let list: Vec<serde_json::Value> = serde_json::from_str(text).expect("materials.json");
+    list.iter()
+        .filter(|m| m["model"] == "periodic")
+        .map(|m| {
+            (
+                m["name"].as_str().unwrap().to_string(),
+                m["params"].to_string(),
+            )
+        })
+        .collect()
+}
+
+/// The materials every test covers: the compact disc's defaults, the
+/// sine grating of the task, the shared list, metals and constant or
+/// complex-index Fresnel terms.
+pub(super) fn materials() -> Vec<(String, Brdf)> {
+    let mut list: Vec<(String, String)> = vec![
+        ("cd".into(), r#"{"surface": "cd"}"#.into()),
+        (
+            "sine 1.2/0.12/20".into(),
+            r#"{"surface": "periodic", "period_um": 1.2, "profile": "sine", "height_um": 0.12, "coherence_um": 20}"#.into(),
+        ),
+        (
+            "cd gold".into(),
+            r#"{"surface": "cd", "fresnel": "gold"}"#.into(),
+        ),
+        (
+            "cd constant".into(),
+            r#"{"surface": "cd", "fresnel": 0.8}"#.into(),
+        ),
+        (
+            "sine copper".into(),
+            r#"{"surface": "periodic", "period_um": 1.2, "profile": "sine", "height_um": 0.12, "coherence_um": 20, "fresnel": "copper"}"#.into(),
+        ),
+        (
+            "tabulated index".into(),
+            r#"{"surface": "periodic", "period_um": 3.0, "profile": {"heights_um": [0.0, 0.2, 0.05, 0.3, 0.1]}, "coherence_um": 12, "fresnel": {"eta": 1.5, "k": 0.2}}"#.into(),
+        ),
+    ];
+    list.extend(shared_materials());
+    list.into_iter()
+        .map(|(name, json)| {
+            let brdf = Brdf::from_json(&json).unwrap_or_else(|e| panic!("{name}: {e}"));
+            (name, brdf)
+        })
+        .collect()
+}
+
+/// Pairs on the flanks of order peaks at lambda: wi random, wo at u = n
+/// lambda / Lam + d / (l k) (the order's exponent d^2) and v = d' / (l k),
+/// for every propagating order.
+fn peak_rows(period_um: f64, coherence_um: f64, seed: u64) -> Vec<(DVec3, DVec3, f64)> {
+    let mut rng = crate::benchmark::SplitMix64(seed);
+    let mut rows = Vec::new();
+    while rows.len() < 3000 {
+        let [a, b, c] = rng.three();
+        let lambda = (380.0 + 400.0 * a) as f32 as f64;
+        let k = 2000.0 * PI / lambda;
+        let wi = DVec3::new(1.6 * b - 0.8, 0.3 * c - 0.15, 0.0);
+        let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
+        let [d, e, f] = rng.three();
+        let n_max = (2.0 * period_um * 1000.0 / lambda) as i64;
+        let n = ((2.0 * d - 1.0) * n_max as f64).round();
+        // Exponent up to 16 (f down to 1e-7 of the order's peak).
+        let (du, dv) = (
+            (8.0 * e - 4.0) / (coherence_um * k),
+            (2.0 * f - 1.0) / (coherence_um * k),
+        );
+        let u = n * lambda / (1000.0 * period_um) + du;
+        let (x, y) = (-wi.x - u, -wi.y - dv);
+        if x * x + y * y < 0.999 {
+            let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+            rows.push((round(wi), round(wo), lambda));
+        }
+    }
+    rows
+}
+
+/// Worst relative error of the spectral program where f >= 1e-6 of the
+/// largest value at `rows`, f32 and f64.
+fn peak_errors(brdf: &Brdf, rows: &[(DVec3, DVec3, f64)]) -> (f64, f64, usize) {
+    let program = exported(brdf, ProgramKind::EvalSpectral).unwrap();
+    let (mut e32, mut e64, mut checked) = (0.0f64, 0.0f64, 0);
+    let peak = rows
+        .iter()
+        .map(|&(wi, wo, l)| brdf.eval_spectral(wi, wo, l))
+        .fold(0.0, f64::max);
+    for &(wi, wo, lambda) in rows {
+        let native = brdf.eval_spectral(wi, wo, lambda);
+        let (p32, p64) = run_both(&program, &[wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, lambda]);
+        assert!(p32[0].is_finite() && p32[0] >= 0.0);
+        // (Deeper than 1e-6 of the peak the f32 rounding of w matters near
+        // the zeros of c_n, e.g. J_0 at 2.405: ill-conditioned input.)
+        if native > 1e-6 * peak {
+            checked += 1;
+            let err = (p32[0] - native).abs() / native;
+            if err > e32 && std::env::var("SHOW").is_ok() {
+                println!(
+                    "  {err:.2e} wi {wi} wo {wo} lambda {lambda} f/peak {:.1e} f64 {:.1e}",
+                    native / peak,
+                    (p64[0] - native).abs() / native
+                );
+            }
+            e32 = e32.max(err);
+            e64 = e64.max((p64[0] - native).abs() / native);
+        }
+    }
+    (e32, e64, checked)
+}
+
+#[test]
+fn spectral_kernel_matches_native() {
+    let pairs = pairs(4000, 11);
+    for (name, brdf) in materials() {
+        let e = eval_spectral_errors(&brdf, &pairs, 5);
+        let p = exported(&brdf, ProgramKind::EvalSpectral).unwrap();
+        let gathers = p
+            .code
+            .iter()
+            .filter(|i| i.op == crate::program::Op::Gather)
+            .count();
+        println!(
+            "{name}: random pairs f32 {:.2e} f64 {:.2e} abs {:.1e} ({} checked); {} ops, {} gathers",
+            e.max_rel_f32,
+            e.max_rel_f64,
+            e.max_abs_f32,
+            e.checked,
+            p.code.len(),
+            gathers
+        );
+        assert!(e.max_rel_f64 < 1e-5, "{name}: {e:?}");
+        assert!(e.max_rel_f32 < 1e-4, "{name}: {e:?}");
+    }
+}
+
+#[test]
+fn spectral_kernel_on_order_peaks() {
+    for (name, brdf) in materials() {
+        let crate::models::Surface::Periodic(m) = brdf.surface() else {
+            unreachable!()
+        };
+        let s = m.surface();
+        let rows = peak_rows(s.period_um(), s.coherence_um(), 3);
+        let (e32, e64, checked) = peak_errors(&brdf, &rows);
+        println!("{name}: order flanks f32 {e32:.2e} f64 {e64:.2e} ({checked} checked)");
+        assert!(e64 < 5e-5, "{name}: {e64}");
+        assert!(e32 < 3e-4, "{name}: {e32}");
+    }
+}
+
+#[test]
+fn rgb_matches_native() {
+    use crate::testing::programs::eval_rgb_errors;
+    let pairs = pairs(3000, 17);
+    for (name, brdf) in materials() {
+        let e = eval_rgb_errors(&brdf, &pairs);
+        let p = exported(&brdf, ProgramKind::EvalRgb).unwrap();
+        let gathers = p
+            .code
+            .iter()
+            .filter(|i| i.op == crate::program::Op::Gather)
+            .count();
+        println!(
+            "{name}: RGB f32 {:.2e} f64 {:.2e} abs {:.1e} ({} checked); {} ops, {} gathers, {} table values",
+            e.max_rel_f32,
+            e.max_rel_f64,
+            e.max_abs_f32,
+            e.checked,
+            p.code.len(),
+            gathers,
+            p.table_len()
+        );
+        assert!(e.max_rel_f32 < RGB_TOLERANCE, "{name}: {e:?}");
+    }
+}
+
+/// The core's documented RGB error (docs/implementation.md: 3.1e-3 of the
+/// largest channel against fine references, before gamut mapping), and
+/// what the program is held to against the native path: the program's W~
+/// table is exact where the native moments carry their own table error, so
+/// the two differ by up to both errors (measured: within 3.1e-3 except on
+/// dim peaks at the band's ends, where native and program each err by up
+/// to 2e-2 against the fine reference and by 4.3e-3 from each other).
+const RGB_DOCUMENTED: f64 = 3.1e-3;
+const RGB_TOLERANCE: f64 = 5e-3;
+
+/// Pairs on the orders' rainbows (u = n lambda / Lam for a random lambda of
+/// the band, v within a peak width) and near the mirror direction, where
+/// the RGB value is large: errors relative to each pair's largest channel.
+fn rgb_peak_errors(brdf: &Brdf, seed: u64) -> (f64, f64, usize) {
+    let crate::models::Surface::Periodic(m) = brdf.surface() else {
+        unreachable!()
+    };
+    let (period, l) = (m.surface().period_um(), m.surface().coherence_um());
+    let program = exported(brdf, ProgramKind::EvalRgb).unwrap();
+    let mut rng = crate::benchmark::SplitMix64(seed);
+    let mut rows = Vec::new();
+    while rows.len() < 2000 {
+        let [a, b2, c] = rng.three();
+        let wi = DVec3::new(1.8 * b2 - 0.9, 0.4 * c - 0.2, 0.0);
+        if wi.length_squared() > 0.995 {
+            continue;
+        }
+        let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
+        let [d, e, f] = rng.three();
+        let lambda = 380.0 + 400.0 * a;
+        let k = 2000.0 * PI / lambda;
+        let n_max = (2.0 * period * 1000.0 / lambda) as i64;
+        let n = if d < 0.2 {
+            0.0
+        } else {
+            ((2.0 * d - 1.0) * n_max as f64).round()
+        };
+        let spread = if n == 0.0 { 4.0 } else { 1.0 };
+        let u = n * lambda / (1000.0 * period) + spread * (2.0 * e - 1.0) / (l * k);
+        let v = spread * (2.0 * f - 1.0) / (l * k);
+        let (x, y) = (-wi.x - u, -wi.y - v);
+        if x * x + y * y > 0.999 {
+            continue;
+        }
+        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        let (wi, wo) = (round(wi), round(wo));
+        let native = brdf.eval_rgb(wi, wo);
+        rows.push((wi, wo, native, native[0].max(native[1]).max(native[2])));
+    }
+    let peak = rows.iter().map(|r| r.3).fold(0.0, f64::max);
+    let (mut e32, mut e64, mut checked) = (0.0f64, 0.0f64, 0);
+    for (wi, wo, native, scale) in rows {
+        let (p32, p64) = run_both(&program, &[wi.x, wi.y, wi.z, wo.x, wo.y, wo.z]);
+        assert!(p32.iter().all(|v| v.is_finite() && *v >= 0.0));
+        if scale < 1e-5 * peak {
+            continue;
+        }
+        checked += 1;
+        for ch in 0..3 {
+            let err = (p32[ch] - native[ch]).abs() / scale;
+            if err > e32 && std::env::var("SHOW").is_ok() {
+                println!(
+                    "  {err:.2e}: wi {wi} wo {wo} native {native:?} program {p32:?} f64 {p64:?}"
+                );
+            }
+            e32 = e32.max(err);
+            e64 = e64.max((p64[ch] - native[ch]).abs() / scale);
+        }
+    }
+    (e32, e64, checked)
+}
+
+#[test]
+fn rgb_on_order_peaks() {
+    for (name, brdf) in materials() {
+        let (e32, e64, checked) = rgb_peak_errors(&brdf, 23);
+        println!("{name}: RGB on peaks f32 {e32:.2e} f64 {e64:.2e} ({checked} pairs)");
+        assert!(checked > 500, "{name}");
+        assert!(e32 < RGB_TOLERANCE, "{name}: {e32}");
+    }
+}
+
+/// The RGB program before gamut mapping (f / G, as `reflectance_rgb`)
+/// against the native value at the same pairs as `rgb_peak_errors`.
+fn rgb_pre_gamut_errors(brdf: &Brdf, seed: u64) -> (f64, usize) {
+    use crate::models::{SurfaceModel, SurfacePrograms};
+    use crate::optics::geometry::PairGeometry;
+    use crate::optics::program::PairProgram;
+    use crate::program::Builder;
+    let crate::models::Surface::Periodic(m) = brdf.surface() else {
+        unreachable!()
+    };
+    let b = Builder::new();
+    let wi = [b.input(), b.input(), b.input()];
+    let wo = [b.input(), b.input(), b.input()];
+    let pair = PairProgram::new(&b, wi, wo);
+    let shading = brdf.shading();
+    let rgb = m.reflectance_rgb_program(&b, &shading, &pair).unwrap();
+    let program = b.finish(&rgb);
+    let (period, l) = (m.surface().period_um(), m.surface().coherence_um());
+    let mut rng = crate::benchmark::SplitMix64(seed);
+    let mut rows = Vec::new();
+    while rows.len() < 2000 {
+        let [a, b2, c] = rng.three();
+        let wi = DVec3::new(1.8 * b2 - 0.9, 0.4 * c - 0.2, 0.0);
+        if wi.length_squared() > 0.995 {
+            continue;
+        }
+        let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
+        let [d, e, f] = rng.three();
+        let lambda = 380.0 + 400.0 * a;
+        let k = 2000.0 * PI / lambda;
+        let n_max = (2.0 * period * 1000.0 / lambda) as i64;
+        let n = if d < 0.2 {
+            0.0
+        } else {
+            ((2.0 * d - 1.0) * n_max as f64).round()
+        };
+        let spread = if n == 0.0 { 4.0 } else { 1.0 };
+        let u = n * lambda / (1000.0 * period) + spread * (2.0 * e - 1.0) / (l * k);
+        let v = spread * (2.0 * f - 1.0) / (l * k);
+        let (x, y) = (-wi.x - u, -wi.y - v);
+        if x * x + y * y > 0.999 {
+            continue;
+        }
+        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        let (wi, wo) = (round(wi), round(wo));
+        let g = PairGeometry::new(wi, wo).unwrap();
+        let native = m.reflectance_rgb(&shading, &g);
+        let scale = native.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        rows.push((wi, wo, native, scale));
+    }
+    let peak = rows.iter().map(|r| r.3).fold(0.0, f64::max);
+    let (mut worst, mut checked) = (0.0f64, 0);
+    for (wi, wo, native, scale) in rows {
+        if scale < 1e-5 * peak {
+            continue;
+        }
+        checked += 1;
+        let x: Vec<f32> = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z]
+            .map(|v| v as f32)
+            .to_vec();
+        let p = program.run(&x);
+        for ch in 0..3 {
+            let err = (p[ch] as f64 - native[ch]).abs() / scale;
+            if err > worst && std::env::var("SHOW").is_ok() {
+                let g = PairGeometry::new(wi, wo).unwrap();
+                let truth = crate::spectrum::integrate_rgb_reference(
+                    |l| brdf.eval_spectral(wi, wo, l) / g.geometric_factor,
+                    0.02,
+                );
+                let rel = |x: [f64; 3]| {
+                    (0..3).fold(0.0f64, |a, c| a.max((x[c] - truth[c]).abs())) / scale
+                };
+                let pp = [p[0] as f64, p[1] as f64, p[2] as f64];
+                println!(
+                    "  pre-gamut {err:.2e}: native vs truth {:.2e}, program vs truth {:.2e}; wi {wi} wo {wo} native {native:?}",
+                    rel(native),
+                    rel(pp)
+                );
+            }
+            worst = worst.max(err);
+        }
+    }
+    (worst, checked)
+}
+
+#[test]
+fn rgb_before_gamut_mapping() {
+    for (name, brdf) in materials() {
+        let (e, checked) = rgb_pre_gamut_errors(&brdf, 23);
+        println!("{name}: RGB before gamut mapping f32 {e:.2e} ({checked} pairs)");
+        assert!(checked > 500, "{name}");
+        // The shared list and the task's materials within the documented
+        // error; the dim band-end peaks of the tabulated test profile
+        // within RGB_TOLERANCE (see there).
+        let limit = if name == "tabulated index" {
+            RGB_TOLERANCE
+        } else {
+            RGB_DOCUMENTED
+        };
+        assert!(e < limit, "{name}: {e}");
+    }
+}
+
+/// Incidences of the sampling tests: cos_i 1, 0.5, 0.1 (with azimuths).
+fn incidences() -> [DVec3; 3] {
+    let dir = |cos_t: f64, phi: f64| {
+        let sin_t = (1.0 - cos_t * cos_t).sqrt();
+        DVec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+    };
+    [DVec3::Z, dir(0.5, 0.7), dir(0.1, 2.5)]
+}
+
+/// Chi-square fits of the sampling programs: p > 0.01, or a second run
+/// with 4x the samples and another seed at p > 0.01 (as the native tests).
+fn program_fits(label: &str, brdf: &Brdf, modes: &[Option<f64>], n: usize) {
+    use crate::testing::chi2::chi2_fit;
+    use crate::testing::programs::ProgramSampler;
+    let mut failures = Vec::new();
+    for (k, wi) in incidences().into_iter().enumerate() {
+        for (m, &mode) in modes.iter().enumerate() {
+            let sampler = ProgramSampler::new(brdf, wi, mode);
+            let seed = 1000 * k as u64 + m as u64 + 31;
+            let fit = chi2_fit(&sampler, seed, n);
+            println!(
+                "chi2 program {label} cos_i {:.2} {mode:?}: p = {:.4} (chi2 {:.1}, dof {}), integral {:.5}",
+                wi.z, fit.p_value, fit.chi2, fit.dof, fit.integral
+            );
+            assert!(
+                fit.integral <= 1.0 + 2e-3,
+                "{label}: integral {}",
+                fit.integral
+            );
+            if !(fit.p_value > 0.01) {
+                let again = chi2_fit(&sampler, seed + 7_777_777, 4 * n);
+                println!("    re-test: p = {:.4}", again.p_value);
+                if !(again.p_value > 0.01) {
+                    failures.push(format!("cos_i {} {mode:?}: p = {}", wi.z, again.p_value));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{label}: {failures:?}");
+}
+
+#[test]
+fn chi2_sampling_programs() {
+    let short_cd =
+        Brdf::from_json(r#"{"surface": "cd", "coherence_um": 4, "fresnel": 0.9}"#).unwrap();
+    program_fits("cd l=4", &short_cd, &[Some(550.0), None], 100_000);
+    let sine = Brdf::from_json(
+        r#"{"surface":"periodic","period_um":1.6,"coherence_um":8,"profile":"sine","height_um":0.3,"fresnel":{"eta":1.5,"k":6}}"#,
+    )
+    .unwrap();
+    program_fits("sine", &sine, &[Some(480.0), None], 100_000);
+}
+
+/// The plugin's chi-square materials of tests/materials.json (slow: run
+/// with --ignored).
+#[test]
+#[ignore]
+fn chi2_sampling_programs_shared_materials() {
+    for (name, brdf) in materials() {
+        if name.starts_with("chi2_") {
+            program_fits(&name, &brdf, &[Some(450.0), None], 60_000);
+        }
+    }
+}
+
+/// Mean and variance of the directional-albedo estimator f cos / pdf (RGB:
+/// the channels' sum) of `sample` at wi over n samples.
+fn albedo_variance(
+    brdf: &Brdf,
+    wi: DVec3,
+    mode: Option<f64>,
+    n: usize,
+    seed: u64,
+    sample: &dyn Fn([f64; 3]) -> Option<(DVec3, f64)>,
+) -> (f64, f64) {
+    let mut rng = crate::benchmark::SplitMix64(seed);
+    let (mut sum, mut sum2) = (0.0, 0.0);
+    for _ in 0..n {
+        let x = match sample(rng.three()) {
+            Some((wo, pdf)) if pdf > 0.0 && wo.z > 0.0 => {
+                let f = match mode {
+                    Some(l) => brdf.eval_spectral(wi, wo, l),
+                    None => brdf.eval_rgb(wi, wo).iter().sum(),
+                };
+                f * wo.z / pdf
+            }
+            _ => 0.0,
+        };
+        sum += x;
+        sum2 += x * x;
+    }
+    let mean = sum / n as f64;
+    (mean, sum2 / n as f64 - mean * mean)
+}
+
+/// The variance table of the sampling programs against the core's
+/// strategies and cosine sampling (printed; run with --ignored).
+#[test]
+#[ignore]
+fn sampling_variance_report() {
+    use crate::testing::chi2::Sampler;
+    use crate::testing::programs::ProgramSampler;
+    let list = [
+        ("compact disc", r#"{"surface": "cd", "fresnel": 0.9}"#),
+        (
+            "cd coherence 4",
+            r#"{"surface": "cd", "coherence_um": 4, "fresnel": 0.9}"#,
+        ),
+        (
+            "sine 1.2/0.12/20",
+            r#"{"surface": "periodic", "period_um": 1.2, "profile": "sine", "height_um": 0.12, "coherence_um": 20, "fresnel": 0.9}"#,
+        ),
+    ];
+    let n = 100_000;
+    println!("| material | cos_i | mode | albedo program | albedo core | albedo cosine | Var program | Var core | Var cosine | core / program | cosine / program |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for (name, json) in list {
+        let brdf = Brdf::from_json(json).unwrap();
+        for wi in incidences() {
+            for mode in [Some(550.0), None] {
+                let program = ProgramSampler::new(&brdf, wi, mode);
+                let (mp, vp) = albedo_variance(&brdf, wi, mode, n, 1, &|r| {
+                    let s = program.sample(r);
+                    Some((s.wo, s.pdf))
+                });
+                let strategy = brdf.sampler(wi, mode);
+                let (mc, vc) = albedo_variance(&brdf, wi, mode, n, 2, &|r| {
+                    let s = strategy.sample(r);
+                    (!s.coherent).then_some((s.wo, s.pdf))
+                });
+                let (mk, vk) = albedo_variance(&brdf, wi, mode, n, 3, &|r| {
+                    let wo = crate::sampling::warps::cosine_direction(r[1], r[2]);
+                    Some((wo, wo.z / PI))
+                });
+                let mode_name = mode.map_or("RGB".to_string(), |l| format!("{l} nm"));
+                println!(
+                    "| {name} | {:.2} | {mode_name} | {mp:.4} | {mc:.4} | {mk:.4} | {vp:.3e} | {vc:.3e} | {vk:.3e} | {:.2} | {:.1} |",
+                    wi.z,
+                    vc / vp,
+                    vk / vp
+                );
+            }
+        }
+    }
+}
+
+/// The coherent programs give the native values: gratings have no
+/// coherent lobe (order 0 is a Gaussian lobe), so reflectance and
+/// probability are 0, as natively.
+#[test]
+fn coherent_programs_match_native() {
+    for (name, brdf) in materials() {
+        let rgb = exported(&brdf, ProgramKind::CoherentRgb).unwrap();
+        let spectral = exported(&brdf, ProgramKind::CoherentSpectral).unwrap();
+        for (wi, _) in pairs(50, 3) {
+            let wi = round(wi);
+            let native = brdf.coherent_rgb(wi);
+            let p = rgb.run(&[wi.x, wi.y, wi.z]);
+            for c in 0..3 {
+                assert_eq!(p[c], native[c], "{name}");
+            }
+            assert_eq!(p[3], brdf.coherent_probability(wi, None), "{name}");
+            for lambda in [400.0, 550.0, 700.0] {
+                let p = spectral.run(&[wi.x, wi.y, wi.z, lambda]);
+                assert_eq!(p[0], brdf.coherent_spectral(wi, lambda), "{name}");
+                assert_eq!(p[1], brdf.coherent_probability(wi, Some(lambda)), "{name}");
+            }
+        }
+    }
+}
+
+/// Bad input (NaN, infinite, below the horizon, zero vectors, wavelength 0
+/// or out of band, uniforms outside [0, 1)) gives finite non-negative
+/// values of every program kind (sampled directions: finite, failed below
+/// the horizon or unit above it).
+#[test]
+fn programs_are_finite_for_bad_input() {
+    let bad = [
+        f64::NAN,
+        f64::INFINITY,
+        -f64::INFINITY,
+        -1.0,
+        0.0,
+        1e30,
+        -1e-30,
+        2.0,
+    ];
+    for (name, brdf) in materials().into_iter().take(6) {
+        for kind in ProgramKind::ALL {
+            let p = exported(&brdf, kind).unwrap();
+            let mut rng = crate::benchmark::SplitMix64(9);
+            for trial in 0..400 {
+                let mut inputs: Vec<f64> = (0..p.n_inputs)
+                    .map(|_| {
+                        let [a, b, _] = rng.three();
+                        if a < 0.3 {
+                            bad[(b * bad.len() as f64) as usize % bad.len()]
+                        } else {
+                            2.0 * b - 1.0
+                        }
+                    })
+                    .collect();
+                if kind.spectral() && trial % 2 == 0 {
+                    *inputs.last_mut().unwrap() = [0.0, 360.0, 830.0, 1e4, 550.0][trial % 5];
+                }
+                let (o32, o64) = run_both(&p, &inputs);
+                for v in o32.iter().chain(&o64) {
+                    assert!(v.is_finite(), "{name} {kind:?}: {v} for {inputs:?}");
+                }
+                let is_sample =
+                    matches!(kind, ProgramKind::SampleRgb | ProgramKind::SampleSpectral);
+                if !is_sample {
+                    for v in o32.iter().chain(&o64) {
+                        assert!(*v >= 0.0, "{name} {kind:?}: {v} for {inputs:?}");
+                    }
+                } else {
+                    for o in [&o32, &o64] {
+                        let len = (o[0] * o[0] + o[1] * o[1] + o[2] * o[2]).sqrt();
+                        assert!(
+                            o[2] <= 0.0 || (len - 1.0).abs() < 1e-3,
+                            "{name} {kind:?}: {o:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Op and gather counts of every program kind (printed for the report).
+#[test]
+fn program_sizes() {
+    for (name, brdf) in materials() {
+        let mut line = format!("{name}:");
+        for kind in ProgramKind::ALL {
+            let p = exported(&brdf, kind).unwrap();
+            let gathers = p
+                .code
+                .iter()
+                .filter(|i| i.op == crate::program::Op::Gather)
+                .count();
+            line += &format!(" {kind:?} {}/{}/{}", p.code.len(), gathers, p.table_len());
+        }
+        println!("{line}");
+    }
+}
+
+/// Importance sampling worth having: the programs' estimator of the
+/// directional albedo has less variance than cosine sampling's and is
+/// within 2x of the core's strategies in spectral mode (RGB: within 4x; the
+/// table of sampling_variance_report has the figures).
+#[test]
+fn sampling_variance_against_core_and_cosine() {
+    use crate::testing::chi2::Sampler;
+    use crate::testing::programs::ProgramSampler;
+    for json in [
+        r#"{"surface": "cd", "coherence_um": 4, "fresnel": 0.9}"#,
+        r#"{"surface": "periodic", "period_um": 1.2, "profile": "sine", "height_um": 0.12, "coherence_um": 20, "fresnel": 0.9}"#,
+    ] {
+        let brdf = Brdf::from_json(json).unwrap();
+        for wi in incidences() {
+            for mode in [Some(550.0), None] {
+                let n = 60_000;
+                let program = ProgramSampler::new(&brdf, wi, mode);
+                let (_, vp) = albedo_variance(&brdf, wi, mode, n, 1, &|r| {
+                    let s = program.sample(r);
+                    Some((s.wo, s.pdf))
+                });
+                let strategy = brdf.sampler(wi, mode);
+                let (_, vc) = albedo_variance(&brdf, wi, mode, n, 2, &|r| {
+                    let s = strategy.sample(r);
+                    (!s.coherent).then_some((s.wo, s.pdf))
+                });
+                let (_, vk) = albedo_variance(&brdf, wi, mode, n, 3, &|r| {
+                    let wo = crate::sampling::warps::cosine_direction(r[1], r[2]);
+                    Some((wo, wo.z / PI))
+                });
+                println!(
+                    "{json} cos_i {:.2} {mode:?}: program {vp:.3e} core {vc:.3e} cosine {vk:.3e}",
+                    wi.z
+                );
+                assert!(vp < vk, "{json} {mode:?} cos_i {}: worse than cosine", wi.z);
+                let limit = if mode.is_some() { 2.0 } else { 4.0 };
+                assert!(
+                    vp < limit * vc,
+                    "{json} {mode:?} cos_i {}: {vp} vs core {vc}",
+                    wi.z
+                );
+            }
+        }
+    }
+}
