@@ -61,3 +61,10 @@ def plugin_params(params):
         else:
             d[k] = v
     return d
+
+
+def model_of(params):
+    """The surface model family of the core's JSON parameters: gaussian,
+    fractal or periodic (the compact disc is periodic)."""
+    surface = params.get('surface', 'gaussian')
+    return 'periodic' if surface == 'cd' else surface

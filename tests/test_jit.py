@@ -9,7 +9,8 @@ records them as a symbolic virtual call, as a render does (a material without
 programs raises there: test_material_without_programs_*).
 
 - eval against the core (stam_diffraction.core, ctypes): spectral within 1e-4
-  relative, RGB within RGB_TOL of the pair's largest channel, at random,
+  relative, RGB within the model's documented RGB error (RGB_DOCUMENTED) of
+  the pair's largest channel, at random,
   grazing and near-mirror directions;
 - pdf and sample against the core's exported programs run on the CPU
   (run_program below, a numpy executor): the JIT path samples with the programs' strategy, which
@@ -59,10 +60,13 @@ WAVELENGTHS = (450.0, 520.0, 590.0, 660.0)
 
 # Spectral: the issue's 1e-4 relative, where f is above 1e-6 of its peak.
 SPECTRAL_TOL = 1e-4
-# RGB: the core's documented error of its RGB rule (docs/implementation.md:
-# worst 3.3e-4 of the largest channel against the 1 nm reference); the JIT
-# RGB and the core's eval_rgb are two evaluations of the same rule.
-RGB_TOL = 3.5e-4
+# RGB: the core's documented error of its RGB rule, per model, of the
+# pair's largest channel (docs/implementation.md: smooth kernels worst
+# 3.3e-4 against the 1 nm reference; gratings 0.31% against a reference
+# that resolves their peaks); the JIT RGB and the core's eval_rgb are two
+# evaluations of the same rule, each within it.
+RGB_DOCUMENTED = {'gaussian': 3.5e-4, 'fractal': 3.5e-4, 'periodic': 3.1e-3}
+RGB_TOL = RGB_DOCUMENTED['gaussian']
 FLOOR = 1e-6   # of the peak: below it, errors are measured against the floor
 # The plugin's kernels against the same program run in f32 with numpy: the
 # last bits of Dr.Jit's exp, log, sin, cos, and its fused multiply-adds.
@@ -165,7 +169,15 @@ def direction_pairs(n, seed):
     mir = wi[3 * q:] * [-1, -1, 1] + rng.normal(scale=0.02, size=(n - 3 * q, 3))
     mir[:, 2] = np.abs(mir[:, 2]) + 1e-3
     wo[3 * q:] = unit(mir)
-    return wi, wo
+    # The values a variant's f32 arrays hold, so that the core is evaluated
+    # at the directions the plugin sees (near the mirror direction u = -(wi
+    # + wo) is a small difference: rounding the directions to f32 alone
+    # changes f by ~1e-4 relative on a compact disc's order-0 tails).
+    return as_f32(wi), as_f32(wo)
+
+
+def as_f32(x):
+    return np.asarray(x, dtype=np.float32).astype(np.float64)
 
 
 # ---------------------------------------------------------------------------
@@ -308,55 +320,78 @@ def relative_errors(got, ref, axis=None, floor=None):
 @pytest.mark.parametrize('variant', JIT_VARIANTS + ['llvm_ad_mono'])
 @pytest.mark.parametrize('surface', list(SURFACES))
 def test_eval_equals_the_core(variant, surface):
-    """The plugin's f against the core's native f; and against the same
-    program run on the CPU in f32 (the executor's fidelity: always within
-    EXECUTOR_TOL). Where the first misses the issue's tolerance while the
-    second holds, the program's own f32 rounding is the cause: the test is
-    then an expected failure that says so (the core's program tests own it)."""
+    """The plugin's f against the core's native f (the issue's tolerance:
+    SPECTRAL_TOL, or the core's documented RGB error of the model) and
+    against the same program run on the CPU in f32 (the executor's
+    fidelity: EXECUTOR_TOL).
+
+    Where f is ill-conditioned in its f32 inputs (a compact disc's order-0
+    tails at grazing, near-mirror pairs: u = -(wi + wo) is a small
+    difference, and a one-ulp change of a direction moves f by ~1e-4), no
+    f32 evaluation can do better than that spread; it is measured with the
+    core (f64) at directions and wavelengths moved by one f32 ulp, and the tolerance against
+    the core is widened by it pair by pair. Two f32 runs of one program differ there
+    more than elsewhere (their roundings differ: fused multiply-adds, Dr.Jit's
+    elementary functions), so the executor's tolerance is widened pair by
+    pair by three times that spread plus the program's own f32 rounding
+    (its f32 run against its f64 run)."""
     use(variant)
     params = SURFACES[surface]
     progs = programs(params, variant)
     b = symbolic(mi.load_dict({'type': 'diffraction', **stam_materials.plugin_params(params)}))
     wi, wo = direction_pairs(20000, seed=11)
     rng = np.random.default_rng(12)
-    lam = rng.uniform(360.0, 830.0, size=(len(wi), 4))
+    lam = as_f32(rng.uniform(360.0, 830.0, size=(len(wi), 4)))
     si = make_si(wi, lam)
     got = to_np(b.eval(mi.BSDFContext(), si, mi.Vector3f(wo.T))) / wo[:, 2]
     axis = None if mi.is_spectral else 0
+    nudged = [(ulp_nudge(wi, rng), ulp_nudge(wo, rng), ulp_nudge(lam, rng)) for _ in range(4)]
     with stam_core.Brdf(params) as c:
         if mi.is_spectral:
-            ref = np.stack([c.eval_spectral(wi, wo, lam[:, j]) for j in range(4)])
+            def core(a, o, lam=lam):
+                return np.stack([c.eval_spectral(a, o, lam[:, j]) for j in range(4)])
             f32 = np.stack([run32(progs['eval_spectral'], [*wi.T, *wo.T, lam[:, j]])[0]
                             for j in range(4)])
-            f32n = np.stack([run32(progs['eval_spectral'], [*wi.T, *wo.T, lam[:, j]], False)[0]
-                             for j in range(4)])
+            f64 = np.stack([run_program(progs['eval_spectral'], [*wi.T, *wo.T, lam[:, j]])[0]
+                            for j in range(4)])
             tol = SPECTRAL_TOL
         else:
-            ref = c.eval_rgb(wi, wo).T
+            def core(a, o, _lam=None):
+                rgb = c.eval_rgb(a, o).T
+                # mono: the luminance of RGB, with the core's weights
+                return (stam_core.SRGB_LUMINANCE @ rgb)[None] if mi.is_monochromatic else rgb
             f32 = np.stack(run32(progs['eval_rgb'], [*wi.T, *wo.T]))
-            f32n = np.stack(run32(progs['eval_rgb'], [*wi.T, *wo.T], False))
-            if mi.is_monochromatic:   # the luminance of RGB, with the core's weights
-                ref = (stam_core.SRGB_LUMINANCE @ ref)[None]
+            f64 = np.stack(run_program(progs['eval_rgb'], [*wi.T, *wo.T]))
+            if mi.is_monochromatic:
                 f32 = (stam_core.SRGB_LUMINANCE @ f32)[None]
-                f32n = (stam_core.SRGB_LUMINANCE @ f32n)[None]
-            tol = RGB_TOL
+                f64 = (stam_core.SRGB_LUMINANCE @ f64)[None]
+            tol = RGB_DOCUMENTED[stam_materials.model_of(params)]
+        ref = core(wi, wo)
+        spread = np.max([relative_errors(core(*n), ref, axis) for n in nudged], axis=0)
     err = relative_errors(got, ref, axis)
     err_exec = relative_errors(got, f32.astype(np.float64), axis)
-    err_prog = relative_errors(f32n.astype(np.float64), ref, axis)
-    worst = np.unravel_index(np.argmax(err), err.shape)[-1]
+    # the program's own f32 rounding at each pair (f32 run against f64 run)
+    rounding = relative_errors(f32.astype(np.float64), f64, axis)
+    allowance = 3 * (rounding + spread)
+    worst = np.unravel_index(np.argmax(err - spread), err.shape)[-1]
     report(test='eval', variant=variant, surface=surface, max_error=float(err.max()),
-           p99=float(np.quantile(err, 0.99)), executor_max_error=float(err_exec.max()),
-           program_f32_max_error=float(err_prog.max()),
+           p99=float(np.quantile(err, 0.99)), beyond_conditioning=float(np.max(err - spread)),
+           conditioning_max=float(spread.max()), executor_max_error=float(err_exec.max()),
+           executor_beyond_allowance=float(np.max(err_exec - allowance)),
            nonzero=int(np.sum(ref > FLOOR * ref.max())))
     assert np.all(np.isfinite(got)) and np.all(got >= 0)
     assert np.sum(ref > 1e-3 * ref.max()) > 100   # the pairs saw the lobes
-    assert err_exec.max() <= EXECUTOR_TOL, err_exec.max()
-    if err.max() > tol and err_prog.max() > tol:
-        pytest.xfail('the program in f32 misses the core by %.3g (plugin %.3g, tolerance %g) '
-                     'at wi %s wo %s: the program\'s own f32 rounding' %
-                     (err_prog.max(), err.max(), tol, wi[worst], wo[worst]))
-    assert err.max() <= tol, ('worst at wi %s wo %s: plugin %s, core %s'
-                              % (wi[worst], wo[worst], got[:, worst], ref[:, worst]))
+    assert np.max(err_exec - allowance) <= EXECUTOR_TOL, err_exec.max()
+    assert np.max(err - spread) <= tol, ('worst at wi %s wo %s: plugin %s, core %s'
+                                         % (wi[worst], wo[worst], got[:, worst], ref[:, worst]))
+
+
+def ulp_nudge(v, rng):
+    """v with each component moved by one f32 ulp up or down (at random)."""
+    v32 = np.asarray(v, dtype=np.float32)
+    up = rng.random(v32.shape) < 0.5
+    return np.where(up, np.nextafter(v32, np.float32(np.inf)),
+                    np.nextafter(v32, np.float32(-np.inf))).astype(np.float64)
 
 
 @pytest.mark.parametrize('variant', JIT_VARIANTS)
