@@ -1,10 +1,10 @@
 /* batch.h: host-side batches of the diffraction plugin (diffraction.cpp).
  *
  * The plugin's queries travel to the Rust core (rust-core/include/stam.h) as
- * float buffers: this header stages Mitsuba/Dr.Jit arrays into such buffers
- * (one lane in scalar variants, a whole wavefront in llvm variants), makes
- * the one path-vertex call per batch, and loads the results back into
- * Mitsuba types. No physics: only copies, layout changes and the luminance
+ * float buffers: this header stages Mitsuba arrays into such buffers (one
+ * lane per query: the scalar variants' path; JIT variants run the core's
+ * programs, jit_path.h), makes the one path-vertex call per batch, and
+ * loads the results back into Mitsuba types. No physics: only copies, layout changes and the luminance
  * that monochromatic variants take of the core's RGB output.
  */
 #pragma once
@@ -148,122 +148,34 @@ struct BatchIO {
     static constexpr Channels Ch =
         IsSpectral ? Channels::Spectral : (IsMono ? Channels::Mono : Channels::Rgb);
 
-    /// JIT variants read concrete arrays: refuse symbolic recording (and
-    /// dr.freeze) with a message that says what to do.
-    static void require_evaluated_mode() {
-        if constexpr (dr::is_jit_v<Float>) {
-            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
-                Throw("diffraction: the native core needs concrete arrays, but this "
-                      "call is being recorded symbolically. Disable "
-                      "dr.JitFlag.SymbolicLoops and dr.JitFlag.SymbolicCalls "
-                      "(evaluated mode): importing stam_diffraction does it in the "
-                      "importing thread, stam_diffraction.set_evaluated_mode() in "
-                      "another, `mitsuba -W -W` on the command line. Do not use "
-                      "dr.freeze with this BSDF.");
-        }
-    }
-
-    /// Copy the inputs of a query into the batch: wi_c, wo_c (core frame),
+    /// Copy the inputs of one query into the batch: wi_c, wo_c (core frame),
     /// the path's wavelengths (spectral variants) and, when do_sample, the
-    /// three uniforms. Scalar variants fill one lane; llvm variants evaluate
-    /// the arrays (which needs evaluated mode) and fill a whole wavefront.
+    /// three uniforms. Scalar variants only: JIT variants run the core's
+    /// programs (jit_path.h).
     static void stage(Batch &b, const Vector3f &wi_c, const Vector3f &wo_c,
                       const SurfaceInteraction3f &si, const Float *sample1,
-                      const Point2f *sample2, bool do_sample, const Mask &active) {
-        if constexpr (!dr::is_jit_v<Float>) {
-            DRJIT_MARK_USED(active);
-            b.n = 1;
-            b.wi.assign({ wi_c.x(), wi_c.y(), wi_c.z() });
-            b.wo.assign({ wo_c.x(), wo_c.y(), wo_c.z() });
-            b.lam.clear();
-            if constexpr (IsSpectral)
-                for (size_t j = 0; j < NW; ++j)
-                    b.lam.push_back(si.wavelengths[j]);
-            b.rnd.clear();
-            if (do_sample)
-                b.rnd.assign({ *sample1, sample2->x(), sample2->y() });
-        } else if constexpr (dr::is_llvm_v<Float>) {
-            require_evaluated_mode();
-            stage_jit(b, wi_c, wo_c, si, sample1, sample2, do_sample, active);
-        } else {
-            DRJIT_MARK_USED(b); DRJIT_MARK_USED(wi_c); DRJIT_MARK_USED(wo_c);
-            DRJIT_MARK_USED(si); DRJIT_MARK_USED(sample1); DRJIT_MARK_USED(sample2);
-            DRJIT_MARK_USED(do_sample); DRJIT_MARK_USED(active);
-            Throw("diffraction: unsupported backend");
-        }
-    }
-
-    /// Channel k of an SoA host buffer as a Float
-    static Float load(const std::vector<float> &soa, size_t k, size_t n) {
-        if constexpr (dr::is_jit_v<Float>)
-            return dr::load<Float>(soa.data() + k * n, n);
-        else
-            return soa[k];
-    }
-
-    static UnpolarizedSpectrum load_spectrum(const std::vector<float> &soa, size_t n) {
-        UnpolarizedSpectrum r;
-        for (size_t k = 0; k < NC; ++k)
-            r[k] = load(soa, k, n);
-        return r;
-    }
-
-private:
-    /// JIT variants: evaluate the inputs and copy them into the batch (AoS).
-    static void stage_jit(Batch &b, const Vector3f &wi_c, const Vector3f &wo_c,
-                          const SurfaceInteraction3f &si, const Float *sample1,
-                          const Point2f *sample2, bool do_sample, const Mask &active) {
-        std::vector<Float> in;
-        for (size_t k = 0; k < 3; ++k)
-            in.push_back(dr::detach(wi_c[k]));
-        for (size_t k = 0; k < 3; ++k)
-            in.push_back(dr::detach(wo_c[k]));
+                      const Point2f *sample2, bool do_sample) {
+        static_assert(!dr::is_jit_v<Float>, "the batch ABI serves scalar variants");
+        b.n = 1;
+        b.wi.assign({ wi_c.x(), wi_c.y(), wi_c.z() });
+        b.wo.assign({ wo_c.x(), wo_c.y(), wo_c.z() });
+        b.lam.clear();
         if constexpr (IsSpectral)
             for (size_t j = 0; j < NW; ++j)
-                in.push_back(dr::detach(si.wavelengths[j]));
-        if (do_sample) {
-            in.push_back(dr::detach(*sample1));
-            in.push_back(dr::detach(sample2->x()));
-            in.push_back(dr::detach(sample2->y()));
-        }
-        size_t n = dr::width(active);
-        for (const Float &x : in)
-            n = std::max(n, dr::width(x));
-        for (Float &x : in)
-            dr::schedule(x);
-        dr::eval();
-        dr::sync_thread();
+                b.lam.push_back(si.wavelengths[j]);
+        b.rnd.clear();
+        if (do_sample)
+            b.rnd.assign({ *sample1, sample2->x(), sample2->y() });
+    }
 
-        std::vector<const float *> ptr(in.size());
-        for (size_t k = 0; k < in.size(); ++k)
-            ptr[k] = in[k].data();
-        // Width-1 arrays (literals) broadcast over the batch
-        auto get = [&](size_t k, size_t i) {
-            return dr::width(in[k]) == 1 ? ptr[k][0] : ptr[k][i];
-        };
+    /// Channel k of a one-lane SoA host buffer
+    static Float load(const std::vector<float> &soa, size_t k) { return soa[k]; }
 
-        b.n = n;
-        b.wi.resize(3 * n);
-        b.wo.resize(3 * n);
-        for (size_t i = 0; i < n; ++i)
-            for (size_t k = 0; k < 3; ++k) {
-                b.wi[3 * i + k] = get(k, i);
-                b.wo[3 * i + k] = get(3 + k, i);
-            }
-        size_t at = 6;
-        if constexpr (IsSpectral) {
-            b.lam.resize(NW * n);
-            for (size_t i = 0; i < n; ++i)
-                for (size_t j = 0; j < NW; ++j)
-                    b.lam[i * NW + j] = get(at + j, i);
-            at += NW;
-        }
-        if (do_sample) {
-            b.rnd.resize(3 * n);
-            for (size_t i = 0; i < n; ++i)
-                for (size_t k = 0; k < 3; ++k)
-                    b.rnd[3 * i + k] = get(at + k, i);
-        }
+    static UnpolarizedSpectrum load_spectrum(const std::vector<float> &soa) {
+        UnpolarizedSpectrum r;
+        for (size_t k = 0; k < NC; ++k)
+            r[k] = load(soa, k);
+        return r;
     }
 };
 

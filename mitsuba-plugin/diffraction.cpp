@@ -12,10 +12,7 @@
  * (stam_brdf_export_program: straight-line array code and its tables,
  * exported once per material) with Dr.Jit operations (program.h), so that
  * Dr.Jit traces them with its default flags: symbolic loops and calls,
- * dr.freeze, on LLVM and CUDA, with no host round trip. A material whose
- * programs the core does not export ("energy": "conserving" for now) runs
- * in llvm_ad_* through the batch ABI in evaluated mode (dr.JitFlag.
- * SymbolicLoops / SymbolicCalls off), and is refused in cuda_ad_*.
+ * dr.freeze, on LLVM and CUDA, with no host round trip (jit_path.h).
  *
  * Layout (as Mitsuba's roughconductor.cpp): the manual, the constructor,
  * traverse, parameters_changed, the BSDF methods, to_string, then the
@@ -37,8 +34,8 @@
 
 #include "../rust-core/include/stam.h"
 #include "batch.h"
+#include "jit_path.h"
 #include "params_json.h"
-#include "program.h"
 
 NAMESPACE_BEGIN(mitsuba)
 
@@ -230,11 +227,7 @@ for the material (``stam_brdf_export_program``) as Dr.Jit operations: they
 work with Dr.Jit's default flags (symbolic loops and calls, ``dr.freeze``).
 Their sampling is the programs' strategy (in spectral variants: one of the
 path's wavelengths picked by the first sample, the pdf the mean of the
-wavelengths' densities, as above). A material without programs
-(``"energy": "conserving"`` for now) runs in ``llvm_ad_*`` variants only in
-Dr.Jit's evaluated mode (``dr.JitFlag.SymbolicLoops`` and ``SymbolicCalls``
-off, which ``scripts/stam_mitsuba.py``'s ``setup()`` does) and is refused by
-``cuda_ad_*`` variants.
+wavelengths' densities, as above).
 
 .. tabs::
     .. code-tab:: xml
@@ -263,12 +256,12 @@ using diffraction_detail::CorePtr;
 using diffraction_detail::excerpt;
 using diffraction_detail::json_escape;
 using diffraction_detail::json_number;
+using diffraction_detail::JitPath;
 using diffraction_detail::ParamError;
 using diffraction_detail::parse_profile_heights;
 using diffraction_detail::run_batch;
 using diffraction_detail::Scratch;
 using diffraction_detail::with_plugin_keys;
-namespace program = diffraction_detail::program;
 
 template <typename Float, typename Spectrum>
 class Diffraction final : public BSDF<Float, Spectrum> {
@@ -279,8 +272,8 @@ public:
     enum class Tracks { Linear, Concentric };
 
     using IO = BatchIO<Float, Spectrum>;
-    using Prog = program::Program<Float>;
-    using FloatStorage = DynamicBuffer<Float>;
+    using Jit = JitPath<Float, Spectrum>;
+    using FloatStorage = typename Jit::FloatStorage;
 
     /// The plugin's own keys, which the core does not know (for messages).
     static const std::vector<std::string> &plugin_keys() {
@@ -507,16 +500,7 @@ public:
             oss << "," << std::endl << "  warnings = " << json_escape(m_warnings);
         if constexpr (dr::is_jit_v<Float>) {
             oss << "," << std::endl << "  jit_programs = ";
-            if (m_jit_ready) {
-                const char *names[] = { "eval", "pdf", "sample", "coherent" };
-                const Prog *progs[] = { &m_eval, &m_pdf, &m_sample, &m_coherent };
-                for (size_t k = 0; k < 4; ++k)
-                    oss << names[k] << " " << progs[k]->n_instructions() << " ops "
-                        << progs[k]->n_gathers() << " gathers, ";
-                oss << "tables " << dr::width(m_tables) << " values";
-            } else {
-                oss << "none of " << m_jit_missing << " (evaluated mode only)";
-            }
+            m_jit.describe(oss, dr::width(m_tables));
         }
         oss << std::endl << "]";
         return oss.str();
@@ -547,23 +531,13 @@ private:
         Tracks tracks = Tracks::Linear;
     };
 
-    /// The JIT path of a material (JIT variants): the core's programs of the
-    /// kinds this variant runs, decoded and checked, and their tables (host
-    /// values until commit() loads them into one device array)
-    struct JitPrograms {
-        bool ready = false;  // every kind this variant needs exists
-        std::string missing; // else: the kinds the core does not export
-        Prog eval, pdf, sample, coherent;
-        program::TableStorage tables;
-    };
-
     /// A core material built from the current parameters, not yet in use
     struct Core {
         CorePtr ptr;
         std::string json;
         uint32_t flags = 0;
         std::string warnings;
-        JitPrograms jit;
+        Jit jit; // JIT variants: the core's programs (jit_path.h)
     };
 
     /// Everything one call can ask of the core, in the local frame
@@ -682,66 +656,9 @@ private:
                 err[0] ? err : "the core refused the parameters", plugin_keys()));
         c.flags = stam_brdf_flags(c.ptr.get());
         c.warnings = stam_brdf_warnings(c.ptr.get());
-        if constexpr (dr::is_jit_v<Float>) {
-            try {
-                c.jit = build_programs(c.ptr.get());
-            } catch (const program::Malformed &e) {
-                throw ParamError(std::string("the core's program is unusable (a plugin "
-                                             "built against another core?): ") + e.what());
-            }
-            if (dr::is_cuda_v<Float> && !c.jit.ready)
-                throw ParamError("CUDA variants run the core's programs, and this material "
-                                 "has none of kind " + c.jit.missing + " (\"energy\": "
-                                 "\"conserving\" has no programs yet, nor do surface models "
-                                 "whose programs are not written): use an llvm_ad_* variant "
-                                 "(evaluated mode) or a scalar_* one");
-        }
+        if constexpr (dr::is_jit_v<Float>)
+            c.jit = Jit::build(c.ptr.get());
         return c;
-    }
-
-    /// The programs this variant runs (RGB kinds for RGB and monochromatic
-    /// variants, spectral kinds for spectral ones), each checked against the
-    /// inputs and outputs stam.h gives its kind. Not ready (with the missing
-    /// kinds named) where the core exports no program of one of them.
-    static JitPrograms build_programs(const StamBrdf *core) {
-        JitPrograms j;
-        constexpr bool sp = IO::IsSpectral;
-        struct Kind {
-            uint32_t code;
-            const char *name;
-            size_t inputs, outputs;
-            Prog *dst;
-        };
-        const Kind kinds[] = {
-            { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB,
-              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.eval },
-            { sp ? STAM_PROGRAM_PDF_SPECTRAL : STAM_PROGRAM_PDF_RGB,
-              sp ? "PDF_SPECTRAL" : "PDF_RGB", sp ? 7u : 6u, 1u, &j.pdf },
-            { sp ? STAM_PROGRAM_SAMPLE_SPECTRAL : STAM_PROGRAM_SAMPLE_RGB,
-              sp ? "SAMPLE_SPECTRAL" : "SAMPLE_RGB", sp ? 7u : 6u, 4u, &j.sample },
-            { sp ? STAM_PROGRAM_COHERENT_SPECTRAL : STAM_PROGRAM_COHERENT_RGB,
-              sp ? "COHERENT_SPECTRAL" : "COHERENT_RGB", sp ? 4u : 3u, sp ? 2u : 4u,
-              &j.coherent },
-        };
-        for (const Kind &k : kinds) {
-            std::vector<float> v = program::export_program(core, k.code);
-            if (v.empty()) {
-                j.missing += (j.missing.empty() ? "" : ", ") + std::string(k.name);
-                continue;
-            }
-            Prog p(v, j.tables);
-            if (p.n_inputs() != k.inputs || p.n_outputs() != k.outputs)
-                throw program::Malformed(
-                    std::string(k.name) + " takes " + std::to_string(p.n_inputs()) +
-                    " inputs and gives " + std::to_string(p.n_outputs()) +
-                    " outputs, stam.h says " + std::to_string(k.inputs) + " and " +
-                    std::to_string(k.outputs));
-            *k.dst = std::move(p);
-        }
-        j.ready = j.missing.empty();
-        if (!j.ready)
-            j = JitPrograms{ false, j.missing, {}, {}, {}, {}, {} };
-        return j;
     }
 
     void commit(Core &&c) {
@@ -750,16 +667,8 @@ private:
         m_core_flags = c.flags;
         m_pending_warnings = std::move(c.warnings);
         if constexpr (dr::is_jit_v<Float>) {
-            m_jit_ready = c.jit.ready;
-            m_jit_missing = c.jit.missing;
-            m_eval = std::move(c.jit.eval);
-            m_pdf = std::move(c.jit.pdf);
-            m_sample = std::move(c.jit.sample);
-            m_coherent = std::move(c.jit.coherent);
-            // One array per material (device memory on CUDA), never empty
-            const std::vector<float> &t = c.jit.tables.values();
-            m_tables = t.empty() ? dr::zeros<FloatStorage>(1)
-                                 : dr::load<FloatStorage>(t.data(), t.size());
+            m_tables = c.jit.load_tables();
+            m_jit = std::move(c.jit);
         }
         double t = (double) m_twist * M_PI / 180.0;
         m_cos_twist = (ScalarFloat) std::cos(t);
@@ -933,266 +842,133 @@ private:
         return { c * v.x() - s * v.y(), s * v.x() + c * v.y(), v.z() };
     }
 
-    /// The one place that talks to the core. wo / sample1 / sample2 may be
-    /// null; want_value / want_pdf select the eval outputs.
+    /// What a query asks and where: the lobes, the active lanes (eval: wi
+    /// and wo above the surface; sample: wi), and wi, wo in the core's frame.
+    struct Setup {
+        bool glossy, delta, do_eval, do_sample;
+        Mask active_e, active_s;
+        Float c, s;   // the frame rotation (frame_rotation)
+        Vector3f wi_c, wo_c;
+    };
+
+    /// The one place that answers eval, pdf and sample: wo / sample1 /
+    /// sample2 may be null; want_value / want_pdf select the eval outputs.
+    /// JIT variants run the core's programs (jit_path.h), scalar ones call
+    /// the native core (batch.h).
     Query make_query(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                      const Vector3f *wo, const Float *sample1, const Point2f *sample2,
                      bool want_value, bool want_pdf, Mask active) const {
-        if constexpr (dr::is_jit_v<Float>) {
-            if (m_jit_ready)
-                return jit_query(ctx, si, wo, sample1, sample2, want_value, want_pdf, active);
-            if (jit_flag(JitFlag::SymbolicScope) || jit_flag(JitFlag::FreezingScope))
-                Throw("diffraction: the core exports no program of kind %s for this "
-                      "material (\"energy\": \"conserving\" has none yet, nor do surface "
-                      "models whose programs are not written), so it runs through the "
-                      "native core, which needs concrete arrays; but this call is being "
-                      "recorded symbolically. Disable dr.JitFlag.SymbolicLoops and "
-                      "dr.JitFlag.SymbolicCalls (evaluated mode): "
-                      "stam_diffraction.set_evaluated_mode(), or `mitsuba -W -W` on the "
-                      "command line; do not use dr.freeze with this material.",
-                      m_jit_missing);
-        }
         Query q;
         q.value = dr::zeros<UnpolarizedSpectrum>();
         q.pdf = dr::zeros<Float>();
         q.bs = dr::zeros<BSDFSample3f>();
         q.weight = dr::zeros<UnpolarizedSpectrum>();
 
-        const bool glossy = ctx.is_enabled(BSDFFlags::GlossyReflection, 0),
-                   delta = m_has_coherent && ctx.is_enabled(BSDFFlags::DeltaReflection, 1);
-        const bool do_eval = wo && glossy && (want_value || want_pdf),
-                   do_sample = sample1 && sample2 && (glossy || delta);
-        if (!do_eval && !do_sample)
+        Setup st;
+        st.glossy = ctx.is_enabled(BSDFFlags::GlossyReflection, 0);
+        st.delta = m_has_coherent && ctx.is_enabled(BSDFFlags::DeltaReflection, 1);
+        st.do_eval = wo && st.glossy && (want_value || want_pdf);
+        st.do_sample = sample1 && sample2 && (st.glossy || st.delta);
+        if (!st.do_eval && !st.do_sample)
             return q;
 
-        Float cos_i = Frame3f::cos_theta(si.wi);
-        Mask active_e = active && cos_i > 0.f, active_s = active_e;
-        if (do_eval)
-            active_e &= Frame3f::cos_theta(*wo) > 0.f;
-        if (dr::none_or<false>(active_e || active_s))
+        st.active_e = active && Frame3f::cos_theta(si.wi) > 0.f;
+        st.active_s = st.active_e;
+        if (st.do_eval)
+            st.active_e &= Frame3f::cos_theta(*wo) > 0.f;
+        if (dr::none_or<false>(st.active_e || st.active_s))
             return q;
 
-        auto [c, s] = frame_rotation(si, active_e || active_s);
-        Vector3f wi_c = to_core(si.wi, c, s);
-        Vector3f wo_c = do_eval ? to_core(*wo, c, s) : Vector3f(0.f, 0.f, 1.f);
-        // Lanes outside the hemisphere: a below-horizon wi makes the core return 0
-        wi_c = dr::select(active_e || active_s, wi_c, Vector3f(0.f, 0.f, -1.f));
+        std::tie(st.c, st.s) = frame_rotation(si, st.active_e || st.active_s);
+        st.wi_c = to_core(si.wi, st.c, st.s);
+        st.wo_c = st.do_eval ? to_core(*wo, st.c, st.s) : Vector3f(0.f, 0.f, 1.f);
 
-        // Scalar variants reuse one batch and its temporaries per thread
-        // (no allocation per call); JIT variants stage whole wavefronts.
-        static thread_local Batch scalar_batch;
-        static thread_local Scratch scalar_scratch;
-        Batch jit_batch;
-        Scratch jit_scratch;
-        Batch &b = dr::is_jit_v<Float> ? jit_batch : scalar_batch;
-        Scratch &tmp = dr::is_jit_v<Float> ? jit_scratch : scalar_scratch;
-        b.want_f = do_eval && want_value;
-        b.want_pdf = do_eval && want_pdf;
-        b.want_sample = do_sample;
-
-        // ---- Stage inputs, call the core, read outputs --------------------
-        IO::stage(b, wi_c, wo_c, si, sample1, sample2, do_sample, active_e || active_s);
-        run_batch(m_core.get(), IO::Ch, IO::NW, b, tmp);
-
-        // ---- Eval / pdf ----------------------------------------------------
-        if (do_eval) {
-            Float cos_o = Frame3f::cos_theta(*wo);
-            if (b.want_f) {
-                UnpolarizedSpectrum f = IO::load_spectrum(b.f, b.n);
-                q.value = dr::select(active_e, f * cos_o, 0.f);
-            }
-            if (b.want_pdf)
-                q.pdf = dr::select(active_e, IO::load(b.pdf, 0, b.n), 0.f);
-        }
-
-        // ---- Sample --------------------------------------------------------
-        if (do_sample) {
-            Vector3f swo_c(IO::load(b.s_wo, 0, b.n), IO::load(b.s_wo, 1, b.n),
-                           IO::load(b.s_wo, 2, b.n));
-            Float spdf = IO::load(b.s_pdf, 0, b.n);
-            Mask coh = IO::load(b.s_coh, 0, b.n) > .5f;
-            UnpolarizedSpectrum sval = IO::load_spectrum(b.s_val, b.n);
-
-            Vector3f swo = from_core(swo_c, c, s);
-            Float cos_o = Frame3f::cos_theta(swo);
-            Mask ok = active_s && spdf > 0.f && cos_o > 0.f &&
-                      dr::select(coh, Mask(delta), Mask(glossy));
-
-            q.bs.wo = swo;
-            q.bs.pdf = dr::select(ok, spdf, 0.f);
-            q.bs.eta = 1.f;
-            q.bs.sampled_component = dr::select(coh, UInt32(1), UInt32(0));
-            q.bs.sampled_type = dr::select(coh, UInt32(+BSDFFlags::DeltaReflection),
-                                           UInt32(+BSDFFlags::GlossyReflection));
-            Float inv_pdf = dr::select(ok, dr::rcp(spdf), 0.f);
-            q.weight = sval * dr::select(coh, inv_pdf, cos_o * inv_pdf);
-            q.weight = dr::select(ok, q.weight, 0.f);
-        }
+        if constexpr (dr::is_jit_v<Float>)
+            jit_query(st, si, wo, sample1, sample2, want_value, want_pdf, q);
+        else
+            native_query(st, si, wo, sample1, sample2, want_value, want_pdf, q);
         return q;
     }
 
-    // ---- The JIT path: the core's programs as Dr.Jit operations -----------
+    /// A sampled direction into q: wo (core frame), its density (glossy: the
+    /// pdf; coherent: the lobe's probability), which lobe, and its value
+    /// (glossy: f cos; coherent: the lobe's reflectance).
+    void finish_sample(const Setup &st, const Vector3f &swo_c, const Float &spdf,
+                       const Mask &coh, const UnpolarizedSpectrum &value, Query &q) const {
+        Vector3f swo = from_core(swo_c, st.c, st.s);
+        Mask ok = st.active_s && spdf > 0.f && Frame3f::cos_theta(swo) > 0.f &&
+                  dr::select(coh, Mask(st.delta), Mask(st.glossy));
+        q.bs.wo = swo;
+        q.bs.pdf = dr::select(ok, spdf, 0.f);
+        q.bs.eta = 1.f;
+        q.bs.sampled_component = dr::select(coh, UInt32(1), UInt32(0));
+        q.bs.sampled_type = dr::select(coh, UInt32(+BSDFFlags::DeltaReflection),
+                                       UInt32(+BSDFFlags::GlossyReflection));
+        q.weight = dr::select(ok, value * dr::rcp(spdf), 0.f);
+    }
 
-    /// The same query as make_query through the programs (JIT variants with
-    /// programs): Dr.Jit traces it in every mode (symbolic loops and calls,
-    /// dr.freeze, wavefront), on LLVM and CUDA, with no host round trip.
-    Query jit_query(const BSDFContext &ctx, const SurfaceInteraction3f &si,
-                    const Vector3f *wo, const Float *sample1, const Point2f *sample2,
-                    bool want_value, bool want_pdf, Mask active) const {
-        Query q;
-        q.value = dr::zeros<UnpolarizedSpectrum>();
-        q.pdf = dr::zeros<Float>();
-        q.bs = dr::zeros<BSDFSample3f>();
-        q.weight = dr::zeros<UnpolarizedSpectrum>();
+    /// Scalar variants: the native core through the batch ABI.
+    void native_query(const Setup &st, const SurfaceInteraction3f &si, const Vector3f *wo,
+                      const Float *sample1, const Point2f *sample2, bool want_value,
+                      bool want_pdf, Query &q) const {
+        // One batch and its temporaries per thread (no allocation per call)
+        static thread_local Batch b;
+        static thread_local Scratch tmp;
+        b.want_f = st.do_eval && want_value;
+        b.want_pdf = st.do_eval && want_pdf;
+        b.want_sample = st.do_sample;
+        // Lanes outside the hemisphere: a below-horizon wi makes the core return 0
+        Vector3f wi_c = dr::select(st.active_e || st.active_s, st.wi_c, Vector3f(0.f, 0.f, -1.f));
+        IO::stage(b, wi_c, st.wo_c, si, sample1, sample2, st.do_sample);
+        run_batch(m_core.get(), IO::Ch, IO::NW, b, tmp);
 
-        const bool glossy = ctx.is_enabled(BSDFFlags::GlossyReflection, 0),
-                   delta = m_has_coherent && ctx.is_enabled(BSDFFlags::DeltaReflection, 1);
-        const bool do_eval = wo && glossy && (want_value || want_pdf),
-                   do_sample = sample1 && sample2 && (glossy || delta);
-        if (!do_eval && !do_sample)
-            return q;
+        if (st.do_eval) {
+            if (b.want_f)
+                q.value = dr::select(st.active_e,
+                                     IO::load_spectrum(b.f) * Frame3f::cos_theta(*wo), 0.f);
+            if (b.want_pdf)
+                q.pdf = dr::select(st.active_e, IO::load(b.pdf, 0), 0.f);
+        }
+        if (st.do_sample) {
+            Vector3f swo_c(IO::load(b.s_wo, 0), IO::load(b.s_wo, 1), IO::load(b.s_wo, 2));
+            Mask coh = IO::load(b.s_coh, 0) > .5f;
+            // The core's sample value: f (glossy) or the lobe's reflectance
+            UnpolarizedSpectrum value = IO::load_spectrum(b.s_val);
+            Float cos_o = Frame3f::cos_theta(from_core(swo_c, st.c, st.s));
+            finish_sample(st, swo_c, IO::load(b.s_pdf, 0), coh,
+                          dr::select(coh, value, value * cos_o), q);
+        }
+    }
 
-        Float cos_i = Frame3f::cos_theta(si.wi);
-        Mask active_e = active && cos_i > 0.f, active_s = active_e;
-        if (do_eval)
-            active_e &= Frame3f::cos_theta(*wo) > 0.f;
-        if (dr::none_or<false>(active_e || active_s))
-            return q;
-
-        auto [c, s] = frame_rotation(si, active_e || active_s);
-        Vector3f wi_c = to_core(si.wi, c, s);
+    /// JIT variants: the core's programs as Dr.Jit operations, which Dr.Jit
+    /// traces in every mode (symbolic loops and calls, dr.freeze, wavefront),
+    /// on LLVM and CUDA, with no host round trip.
+    void jit_query(const Setup &st, const SurfaceInteraction3f &si, const Vector3f *wo,
+                   const Float *sample1, const Point2f *sample2, bool want_value,
+                   bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
-
-        if (do_eval) {
-            Vector3f wo_c = to_core(*wo, c, s);
+        if (st.do_eval) {
             if (want_value)
-                q.value = dr::select(active_e, jit_f(wi_c, wo_c, wl) * Frame3f::cos_theta(*wo),
+                q.value = dr::select(st.active_e,
+                                     m_jit.f(st.wi_c, st.wo_c, wl, m_tables) *
+                                         Frame3f::cos_theta(*wo),
                                      0.f);
             if (want_pdf)
-                q.pdf = dr::select(active_e, jit_pdf(wi_c, wo_c, wl), 0.f);
+                q.pdf = dr::select(st.active_e, m_jit.pdf(st.wi_c, st.wo_c, wl, m_tables), 0.f);
         }
-
-        if (do_sample) {
-            auto [swo_c, coh] = jit_sample(wi_c, *sample1, *sample2, wl);
-            Vector3f swo = from_core(swo_c, c, s);
-            Float cos_o = Frame3f::cos_theta(swo);
-            // Glossy: f cos / pdf, both at the sampled direction
-            UnpolarizedSpectrum f = jit_f(wi_c, swo_c, wl);
-            Float spdf = jit_pdf(wi_c, swo_c, wl);
-            UnpolarizedSpectrum value = f * cos_o;
+        if (st.do_sample) {
+            auto [swo_c, coh] = m_jit.sample(st.wi_c, *sample1, *sample2, wl, m_tables);
+            // Glossy: f cos and the pdf, both at the sampled direction
+            Float cos_o = Frame3f::cos_theta(from_core(swo_c, st.c, st.s));
+            UnpolarizedSpectrum value = m_jit.f(st.wi_c, swo_c, wl, m_tables) * cos_o;
+            Float spdf = m_jit.pdf(st.wi_c, swo_c, wl, m_tables);
             if (m_has_coherent) {
-                // Coherent: the lobe's reflectance / its probability
-                auto [r, p_c] = jit_coherent(wi_c, wl);
+                // Coherent: the lobe's reflectance and its probability
+                auto [r, p_c] = m_jit.coherent(st.wi_c, wl, m_tables);
                 spdf = dr::select(coh, p_c, spdf);
                 value = dr::select(coh, r, value);
             }
-            Mask ok = active_s && spdf > 0.f && cos_o > 0.f &&
-                      dr::select(coh, Mask(delta), Mask(glossy));
-
-            q.bs.wo = swo;
-            q.bs.pdf = dr::select(ok, spdf, 0.f);
-            q.bs.eta = 1.f;
-            q.bs.sampled_component = dr::select(coh, UInt32(1), UInt32(0));
-            q.bs.sampled_type = dr::select(coh, UInt32(+BSDFFlags::DeltaReflection),
-                                           UInt32(+BSDFFlags::GlossyReflection));
-            q.weight = dr::select(ok, value * dr::rcp(spdf), 0.f);
-        }
-        return q;
-    }
-
-    /// The inputs of a program: the directions (core frame), then extras
-    static std::vector<Float> inputs(const Vector3f &a, const Vector3f *b,
-                                     std::initializer_list<Float> extra) {
-        std::vector<Float> in{ a.x(), a.y(), a.z() };
-        if (b)
-            in.insert(in.end(), { b->x(), b->y(), b->z() });
-        in.insert(in.end(), extra);
-        return in;
-    }
-
-    /// A program's RGB outputs as the variant's spectrum (monochromatic:
-    /// their luminance, with the core's weights, as batch.h)
-    static UnpolarizedSpectrum from_rgb(const std::vector<Float> &o) {
-        if constexpr (IO::IsMono) {
-            UnpolarizedSpectrum r;
-            r[0] = (float) STAM_SRGB_LUMINANCE_R * o[0] + (float) STAM_SRGB_LUMINANCE_G * o[1] +
-                   (float) STAM_SRGB_LUMINANCE_B * o[2];
-            return r;
-        } else {
-            return UnpolarizedSpectrum(o[0], o[1], o[2]);
-        }
-    }
-
-    /// f(wi, wo) without cos, at each of the path's wavelengths (spectral)
-    /// or in RGB
-    UnpolarizedSpectrum jit_f(const Vector3f &wi, const Vector3f &wo,
-                              const Wavelength &wl) const {
-        if constexpr (IO::IsSpectral) {
-            UnpolarizedSpectrum f;
-            for (size_t j = 0; j < IO::NW; ++j)
-                f[j] = m_eval.run(inputs(wi, &wo, { wl[j] }), m_tables)[0];
-            return f;
-        } else {
-            DRJIT_MARK_USED(wl);
-            return from_rgb(m_eval.run(inputs(wi, &wo, {}), m_tables));
-        }
-    }
-
-    /// The glossy density at wo; spectral: the mean of the wavelengths'
-    /// densities, the density of jit_sample's mixture
-    Float jit_pdf(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl) const {
-        if constexpr (IO::IsSpectral) {
-            Float p = 0.f;
-            for (size_t j = 0; j < IO::NW; ++j)
-                p += m_pdf.run(inputs(wi, &wo, { wl[j] }), m_tables)[0];
-            return p * (1.f / IO::NW);
-        } else {
-            DRJIT_MARK_USED(wl);
-            return m_pdf.run(inputs(wi, &wo, {}), m_tables)[0];
-        }
-    }
-
-    /// A direction from the SAMPLE program (core frame) and whether it is
-    /// the coherent lobe's. Spectral: sample1 picks one of the path's
-    /// wavelengths uniformly and is remapped to [0, 1) for the program.
-    std::pair<Vector3f, Mask> jit_sample(const Vector3f &wi, const Float &sample1,
-                                         const Point2f &sample2, const Wavelength &wl) const {
-        std::vector<Float> o;
-        if constexpr (IO::IsSpectral) {
-            Float x = sample1 * (float) IO::NW;
-            Float j = dr::clip(dr::floor(x), 0.f, (float) (IO::NW - 1));
-            Float u0 = dr::clip(x - j, 0.f, dr::OneMinusEpsilon<Float>);
-            Float lambda = wl[0];
-            for (size_t k = 1; k < IO::NW; ++k)
-                lambda = dr::select(j == (float) k, wl[k], lambda);
-            o = m_sample.run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }),
-                             m_tables);
-        } else {
-            DRJIT_MARK_USED(wl);
-            o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }),
-                             m_tables);
-        }
-        return { Vector3f(o[0], o[1], o[2]), o[3] > .5f };
-    }
-
-    /// The coherent lobe at wi: its reflectance and the probability that
-    /// jit_sample picks it (spectral: the mean over the path's wavelengths,
-    /// the mixture's probability of the common mirror direction)
-    std::pair<UnpolarizedSpectrum, Float> jit_coherent(const Vector3f &wi,
-                                                        const Wavelength &wl) const {
-        if constexpr (IO::IsSpectral) {
-            UnpolarizedSpectrum r;
-            Float p = 0.f;
-            for (size_t j = 0; j < IO::NW; ++j) {
-                std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, { wl[j] }), m_tables);
-                r[j] = o[0];
-                p += o[1];
-            }
-            return { r, p * (1.f / IO::NW) };
-        } else {
-            DRJIT_MARK_USED(wl);
-            std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, {}), m_tables);
-            return { from_rgb(o), o[3] };
+            finish_sample(st, swo_c, spdf, coh, value, q);
         }
     }
 
@@ -1226,13 +1002,10 @@ private:
     bool m_has_coherent = false;
     std::string m_warnings, m_pending_warnings; // logged, and of the core in use
 
-    // JIT variants: the core's programs (the JIT path), or the kinds the
-    // core does not export for this material (it then runs through the
-    // native core in evaluated mode)
-    bool m_jit_ready = false;
-    std::string m_jit_missing;
-    Prog m_eval, m_pdf, m_sample, m_coherent;
-    FloatStorage m_tables; // every program's tables, one array
+    // JIT variants: the core's programs, and every program's tables in one
+    // array (traversed, so that dr.freeze sees them)
+    Jit m_jit;
+    FloatStorage m_tables;
 
     MI_TRAVERSE_CB(Base, m_tables)
 };

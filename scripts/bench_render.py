@@ -64,31 +64,11 @@ def scene(mi, bsdf, size, spp):
     })
 
 
-def has_programs(bsdf, variant):
-    """Whether the core exports the programs this JIT variant runs for the
-    material (stam_brdf_export_program); scalar variants need none."""
-    if variant.startswith('scalar') or bsdf['type'] != 'diffraction':
-        return True
-    from stam_diffraction import core
-    params = {k: v for k, v in bsdf.items() if k != 'type'}
-    kind = core.PROGRAM_EVAL_SPECTRAL if 'spectral' in variant else core.PROGRAM_EVAL_RGB
-    with core.Brdf(params) as b:
-        return b.export_program(kind) is not None
-
-
 def time_renders(mi, materials, size, spp, repeats):
     """Fastest of `repeats` renders per material. The rounds are interleaved
     (every material once per round), so that a slow spell of the shared
-    machine hits all of them alike instead of one material's renders.
-    In JIT variants, materials without programs (which would need Dr.Jit's
-    evaluated mode) are left out and reported as nan."""
-    variant = mi.variant()
-    skipped = [name for name, bsdf in materials.items() if not has_programs(bsdf, variant)]
-    for name in skipped:
-        print('[bench_render] %s: %s has no programs here, left out' % (variant, name),
-              flush=True)
-    scenes = {name: scene(mi, bsdf, size, spp) for name, bsdf in materials.items()
-              if name not in skipped}
+    machine hits all of them alike instead of one material's renders."""
+    scenes = {name: scene(mi, bsdf, size, spp) for name, bsdf in materials.items()}
     for s in scenes.values():  # warm-up: lazily built tables, caches, kernels
         mi.render(s, spp=spp, seed=0)
     best = {name: float('inf') for name in scenes}
@@ -97,7 +77,6 @@ def time_renders(mi, materials, size, spp, repeats):
             t = time.perf_counter()
             mi.render(s, spp=spp, seed=r)
             best[name] = min(best[name], time.perf_counter() - t)
-    best.update({name: float('nan') for name in skipped})
     return best
 
 
@@ -107,7 +86,7 @@ def run_one(args):
     rows = []
     for variant in args.variants.split(','):
         # JIT variants in Mitsuba's default (symbolic) mode
-        mi = stam_mitsuba.setup(variant, evaluated=False)
+        mi = stam_mitsuba.setup(variant)
         print('[bench_render] %s: %d interleaved rounds of %d renders...'
               % (variant, args.repeats, len(MATERIALS)), flush=True)
         best = time_renders(mi, MATERIALS, args.size, args.spp, args.repeats)

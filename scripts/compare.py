@@ -165,20 +165,9 @@ def scene_dict(mi, cfg, film='hdrfilm'):
     }
 
 
-def has_programs(cfg, variant):
-    """Whether the core exports the eval program this JIT variant runs for
-    the material of `cfg` (else the plugin needs Dr.Jit's evaluated mode)."""
-    kind = (stam_core.PROGRAM_EVAL_SPECTRAL if 'spectral' in variant
-            else stam_core.PROGRAM_EVAL_RGB)
-    with stam_core.Brdf(cfg['material']) as b:
-        return b.export_program(kind) is not None
-
-
 def render_mitsuba(variant, cfg, film='hdrfilm', seed=0):
-    # JIT variants in Mitsuba's default (symbolic) mode where the material
-    # has programs
-    evaluated = variant.startswith('llvm') and not has_programs(cfg, variant)
-    mi = stam_mitsuba.setup(variant, evaluated=evaluated)
+    # JIT variants in Mitsuba's default (symbolic) mode
+    mi = stam_mitsuba.setup(variant)
     scene = mi.load_dict(scene_dict(mi, cfg, film))
     t0 = time.time()
     img = np.array(mi.render(scene, seed=seed), dtype=np.float64)
@@ -307,8 +296,6 @@ def check_image(model, check, size, subpixels, out_dir=OUT_DIR, cie_step_nm=None
         res['bias'] = math.sqrt(max(0.0, mse_avg - mse_12 / 4.0)) / rms_ref
         res['raw_rel_rmse'] = res['rel_rmse']
         test = avg
-    if jit and not has_programs(cfg, variant):
-        variant += ' (evaluated)'
     res.update(model=model, check=check, variant=variant, size=size,
                spp=subpixels ** 2, t_mitsuba=t_mi, t_rust=t_rust,
                limit=RMSE_LIMIT,

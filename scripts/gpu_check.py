@@ -220,7 +220,6 @@ def main(argv=None):
         return 0
     import mitsuba as mi
     import drjit as dr
-    stam_diffraction.set_evaluated_mode(False)  # Dr.Jit's defaults: symbolic
     t0 = time.time()
     failed = check_accuracy(mi, dr, 20000 if args.quick else 200000)
     failed += check_chi2(mi, dr, args.quick)

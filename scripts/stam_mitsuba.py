@@ -10,13 +10,11 @@ Importing this module imports stam_diffraction from python/ (what a user gets
 from the wheel, here with the checkout's build outputs: build/plugins/
 diffraction.so, target/release/libstam.so), which, before drjit is imported,
 points DRJIT_LIBLLVM_PATH at a libLLVM >= 17 and DRJIT_CACHE_DIR at
-<project>/.drjit-cache (unless set), makes type="diffraction" loadable in every
-variant and switches Dr.Jit's symbolic loops and calls off (evaluated mode: the
-plugin calls native code on concrete arrays).
+<project>/.drjit-cache (unless set) and makes type="diffraction" loadable in
+every variant. Dr.Jit's flags stay its defaults.
 
-setup(variant) refuses CUDA variants (the core runs on the CPU), checks that the
-plugin is built, selects the variant and sets evaluated mode in the calling
-thread (or symbolic mode with evaluated=False). It returns the mitsuba module.
+setup(variant) checks that the plugin is built and selects the variant; it
+returns the mitsuba module.
 
 Run as a script (`python scripts/stam_mitsuba.py [variant]`, default scalar_rgb)
 it loads a compact disc BSDF and prints it: a check that the plugin loads.
@@ -29,17 +27,13 @@ PROJECT_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(PROJECT_DIR, 'python'))
 import stam_diffraction  # noqa: E402
 
-def setup(variant='scalar_rgb', evaluated=True):
+def setup(variant='scalar_rgb'):
     """Select `variant` for type="diffraction"; returns `mitsuba`."""
-    if variant.startswith('cuda'):
-        raise ValueError('stam_mitsuba: CUDA variants are not supported by the '
-                         'diffraction plugin (the core runs on the CPU)')
     if not os.path.exists(stam_diffraction.PLUGIN):
         raise FileNotFoundError('stam_mitsuba: %s not built (run `make plugin`)'
                                 % stam_diffraction.PLUGIN)
     import mitsuba as mi
     mi.set_variant(variant)
-    stam_diffraction.set_evaluated_mode(evaluated)
     return mi
 
 

@@ -24,10 +24,9 @@ def out_dir(tmp_path_factory):
 
 
 # jit: llvm_ad_rgb / llvm_ad_spectral with Dr.Jit's default flags (the plugin
-# executing the core's programs) instead of scalar_rgb / scalar_spectral, for
-# the models whose programs exist (the periodic ones run in evaluated mode).
-CASES = [(m, False) for m in ('gaussian', 'gaussian_aniso', 'fractal', 'periodic', 'cd')] + \
-    [(m, True) for m in ('gaussian', 'gaussian_aniso', 'fractal')]
+# executing the core's programs) instead of scalar_rgb / scalar_spectral.
+CASES = [(m, jit) for jit in (False, True)
+         for m in ('gaussian', 'gaussian_aniso', 'fractal', 'periodic', 'cd')]
 
 
 @pytest.mark.parametrize('model,jit', CASES)
@@ -39,7 +38,8 @@ def test_rgb_matches_rust_only(model, jit, out_dir):
 
 
 @pytest.mark.parametrize('model,jit', [('gaussian_aniso', False), ('periodic', False),
-                                       ('gaussian_aniso', True), ('fractal', True)])
+                                       ('gaussian_aniso', True), ('fractal', True),
+                                       ('periodic', True)])
 def test_spectral_bands_match_rust_only(model, jit, out_dir):
     r = compare.check_image(model, 'bands', 32, 4, out_dir, pictures=False, jit=jit)
     assert r['mean_ref'] > 0

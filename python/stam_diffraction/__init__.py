@@ -17,12 +17,10 @@ Importing the package:
     DRJIT_CACHE_DIR, if unset, to the checkout's .drjit-cache;
   * appends PLUGIN_DIR to Mitsuba's FileResolver, which is shared by all
     variants: type="diffraction" then loads in every variant, whether
-    mi.set_variant was called before or after;
-  * switches Dr.Jit's symbolic loops and calls off in the importing thread
-    (dr.JitFlag.SymbolicLoops, SymbolicCalls): in the llvm_* variants the plugin
-    calls the core (native code) on concrete arrays, which exist only in this
-    evaluated mode. The flags are per thread: set_evaluated_mode() sets them in
-    another thread, or back on. With the `mitsuba` command, `-W -W` does the same.
+    mi.set_variant was called before or after.
+It leaves Dr.Jit's flags alone: the JIT variants (llvm_ad_*, cuda_ad_*) run
+the core's programs with Dr.Jit's default flags (symbolic loops and calls,
+dr.freeze).
 
 The `mitsuba` command finds the plugin with
 `mitsuba -a "$(python -m stam_diffraction --plugin-dir)" scene.xml`.
@@ -40,8 +38,7 @@ from importlib import metadata
 from ._layout import ABI_RECORD, CORE_LIB, HEADER, PLUGIN, PLUGIN_DIR, SOURCE_ROOT
 
 __all__ = ['PLUGIN_DIR', 'PLUGIN', 'CORE_LIB', 'HEADER', 'VersionMismatchError',
-           'compiled_versions', 'installed_versions', 'check_versions', 'find_libllvm',
-           'set_evaluated_mode']
+           'compiled_versions', 'installed_versions', 'check_versions', 'find_libllvm']
 
 # The packages whose C++ ABI the plugin follows exactly (docs/mitsuba.md).
 ABI_PACKAGES = ('mitsuba', 'drjit')
@@ -124,14 +121,6 @@ def _configure_drjit_environment():
         os.environ['DRJIT_CACHE_DIR'] = cache
 
 
-def set_evaluated_mode(enabled=True):
-    """Dr.Jit's symbolic loops and calls off (enabled) or back on, in the
-    calling thread: the plugin needs them off in the llvm_* variants."""
-    import drjit as dr
-    dr.set_flag(dr.JitFlag.SymbolicLoops, not enabled)
-    dr.set_flag(dr.JitFlag.SymbolicCalls, not enabled)
-
-
 def _register_plugin_dir():
     import mitsuba as mi
     fr = mi.file_resolver()
@@ -142,6 +131,5 @@ def _register_plugin_dir():
 check_versions()
 _configure_drjit_environment()
 _register_plugin_dir()
-set_evaluated_mode()
 # The distribution's version (the core's), None in a source checkout.
 __version__ = None if SOURCE_ROOT else metadata.version('stam-diffraction')

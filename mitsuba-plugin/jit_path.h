@@ -1,0 +1,215 @@
+/* jit_path.h: the JIT variants' path of the diffraction plugin (diffraction.cpp).
+ *
+ * In llvm_ad_* and cuda_ad_* the plugin evaluates, samples and takes the pdf
+ * of a material by running the programs the core exports for it
+ * (stam_brdf_export_program; rust-core/src/material/program.rs) with Dr.Jit
+ * operations (program.h). This header holds the four programs a variant
+ * runs and drives them: which kind for which variant, the inputs in the
+ * order stam.h gives, spectral variants' per-wavelength runs and mixture
+ * pdf, the luminance of monochromatic variants. No physics: the frame
+ * (twist, tracks) and the BSDF contract (cosines, masks, sample weights)
+ * are diffraction.cpp's, the formulas the core's.
+ */
+#pragma once
+
+#include <mitsuba/core/spectrum.h>
+#include <mitsuba/render/interaction.h>
+
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "../rust-core/include/stam.h"
+#include "params_json.h"
+#include "program.h"
+
+NAMESPACE_BEGIN(mitsuba)
+NAMESPACE_BEGIN(diffraction_detail)
+
+template <typename Float, typename Spectrum> class JitPath {
+public:
+    MI_IMPORT_TYPES()
+    using Prog = program::Program<Float>;
+    using FloatStorage = DynamicBuffer<Float>;
+
+    static constexpr bool IsSpectral = is_spectral_v<Spectrum>;
+    static constexpr bool IsMono = is_monochromatic_v<Spectrum>;
+    static constexpr size_t NW = IsSpectral ? dr::size_v<Wavelength> : 0;
+
+    JitPath() = default;
+
+    /// The programs of the kinds this variant runs (RGB kinds for RGB and
+    /// monochromatic variants, spectral kinds for spectral ones), each
+    /// checked against the inputs and outputs stam.h gives its kind; their
+    /// tables stay host values until `load_tables`. Throws ParamError
+    /// naming the kinds the core does not export for the material.
+    static JitPath build(const StamBrdf *core) {
+        JitPath j;
+        constexpr bool sp = IsSpectral;
+        struct Kind {
+            uint32_t code;
+            const char *name;
+            size_t inputs, outputs;
+            Prog *dst;
+        };
+        const Kind kinds[] = {
+            { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB,
+              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.m_eval },
+            { sp ? STAM_PROGRAM_PDF_SPECTRAL : STAM_PROGRAM_PDF_RGB,
+              sp ? "PDF_SPECTRAL" : "PDF_RGB", sp ? 7u : 6u, 1u, &j.m_pdf },
+            { sp ? STAM_PROGRAM_SAMPLE_SPECTRAL : STAM_PROGRAM_SAMPLE_RGB,
+              sp ? "SAMPLE_SPECTRAL" : "SAMPLE_RGB", sp ? 7u : 6u, 4u, &j.m_sample },
+            { sp ? STAM_PROGRAM_COHERENT_SPECTRAL : STAM_PROGRAM_COHERENT_RGB,
+              sp ? "COHERENT_SPECTRAL" : "COHERENT_RGB", sp ? 4u : 3u, sp ? 2u : 4u,
+              &j.m_coherent },
+        };
+        std::string missing;
+        try {
+            for (const Kind &k : kinds) {
+                std::vector<float> v = program::export_program(core, k.code);
+                if (v.empty()) {
+                    missing += (missing.empty() ? "" : ", ") + std::string(k.name);
+                    continue;
+                }
+                Prog p(v, j.m_host_tables);
+                if (p.n_inputs() != k.inputs || p.n_outputs() != k.outputs)
+                    throw program::Malformed(
+                        std::string(k.name) + " takes " + std::to_string(p.n_inputs()) +
+                        " inputs and gives " + std::to_string(p.n_outputs()) +
+                        " outputs, stam.h says " + std::to_string(k.inputs) + " and " +
+                        std::to_string(k.outputs));
+                *k.dst = std::move(p);
+            }
+        } catch (const program::Malformed &e) {
+            throw ParamError(std::string("the core's program is unusable (a plugin built "
+                                         "against another core?): ") + e.what());
+        }
+        if (!missing.empty())
+            throw ParamError("the core exports no program of kind " + missing +
+                             " for this material, which the JIT variants run; render it "
+                             "in a scalar_* variant (please report the material)");
+        return j;
+    }
+
+    /// Every program's tables as one array (device memory on CUDA; never
+    /// empty), which the material keeps and traverses for dr.freeze.
+    FloatStorage load_tables() const {
+        const std::vector<float> &t = m_host_tables.values();
+        return t.empty() ? dr::zeros<FloatStorage>(1)
+                         : dr::load<FloatStorage>(t.data(), t.size());
+    }
+
+    /// "eval N ops M gathers, ..., tables K values" (the object's string form)
+    void describe(std::ostream &os, size_t table_values) const {
+        const char *names[] = { "eval", "pdf", "sample", "coherent" };
+        const Prog *progs[] = { &m_eval, &m_pdf, &m_sample, &m_coherent };
+        for (size_t k = 0; k < 4; ++k)
+            os << names[k] << " " << progs[k]->n_instructions() << " ops "
+               << progs[k]->n_gathers() << " gathers, ";
+        os << "tables " << table_values << " values";
+    }
+
+    /// f(wi, wo) without cos (core frame), at each of the path's
+    /// wavelengths (spectral) or in RGB
+    UnpolarizedSpectrum f(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
+                          const FloatStorage &tables) const {
+        if constexpr (IsSpectral) {
+            UnpolarizedSpectrum f;
+            for (size_t j = 0; j < NW; ++j)
+                f[j] = m_eval.run(inputs(wi, &wo, { wl[j] }), tables)[0];
+            return f;
+        } else {
+            DRJIT_MARK_USED(wl);
+            return from_rgb(m_eval.run(inputs(wi, &wo, {}), tables));
+        }
+    }
+
+    /// The glossy density at wo; spectral: the mean of the wavelengths'
+    /// densities, the density of `sample`'s mixture
+    Float pdf(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
+              const FloatStorage &tables) const {
+        if constexpr (IsSpectral) {
+            Float p = 0.f;
+            for (size_t j = 0; j < NW; ++j)
+                p += m_pdf.run(inputs(wi, &wo, { wl[j] }), tables)[0];
+            return p * (1.f / NW);
+        } else {
+            DRJIT_MARK_USED(wl);
+            return m_pdf.run(inputs(wi, &wo, {}), tables)[0];
+        }
+    }
+
+    /// A direction from the SAMPLE program (core frame) and whether it is
+    /// the coherent lobe's. Spectral: sample1 picks one of the path's
+    /// wavelengths uniformly and is remapped to [0, 1) for the program.
+    std::pair<Vector3f, Mask> sample(const Vector3f &wi, const Float &sample1,
+                                     const Point2f &sample2, const Wavelength &wl,
+                                     const FloatStorage &tables) const {
+        std::vector<Float> o;
+        if constexpr (IsSpectral) {
+            Float x = sample1 * (float) NW;
+            Float j = dr::clip(dr::floor(x), 0.f, (float) (NW - 1));
+            Float u0 = dr::clip(x - j, 0.f, dr::OneMinusEpsilon<Float>);
+            Float lambda = wl[0];
+            for (size_t k = 1; k < NW; ++k)
+                lambda = dr::select(j == (float) k, wl[k], lambda);
+            o = m_sample.run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }),
+                             tables);
+        } else {
+            DRJIT_MARK_USED(wl);
+            o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables);
+        }
+        return { Vector3f(o[0], o[1], o[2]), o[3] > .5f };
+    }
+
+    /// The coherent lobe at wi: its reflectance and the probability that
+    /// `sample` picks it (spectral: the mean over the path's wavelengths,
+    /// the mixture's probability of the common mirror direction)
+    std::pair<UnpolarizedSpectrum, Float> coherent(const Vector3f &wi, const Wavelength &wl,
+                                                   const FloatStorage &tables) const {
+        if constexpr (IsSpectral) {
+            UnpolarizedSpectrum r;
+            Float p = 0.f;
+            for (size_t j = 0; j < NW; ++j) {
+                std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, { wl[j] }), tables);
+                r[j] = o[0];
+                p += o[1];
+            }
+            return { r, p * (1.f / NW) };
+        } else {
+            DRJIT_MARK_USED(wl);
+            std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, {}), tables);
+            return { from_rgb(o), o[3] };
+        }
+    }
+
+private:
+    /// The inputs of a program: the directions (core frame), then extras
+    static std::vector<Float> inputs(const Vector3f &a, const Vector3f *b,
+                                     std::initializer_list<Float> extra) {
+        std::vector<Float> in{ a.x(), a.y(), a.z() };
+        if (b)
+            in.insert(in.end(), { b->x(), b->y(), b->z() });
+        in.insert(in.end(), extra);
+        return in;
+    }
+
+    /// A program's RGB outputs as the variant's spectrum (monochromatic:
+    /// their luminance, with the core's weights, as batch.h)
+    static UnpolarizedSpectrum from_rgb(const std::vector<Float> &o) {
+        if constexpr (IsMono) {
+            UnpolarizedSpectrum r;
+            r[0] = (float) STAM_SRGB_LUMINANCE_R * o[0] + (float) STAM_SRGB_LUMINANCE_G * o[1] +
+                   (float) STAM_SRGB_LUMINANCE_B * o[2];
+            return r;
+        } else {
+            return UnpolarizedSpectrum(o[0], o[1], o[2]);
+        }
+    }
+
+    Prog m_eval, m_pdf, m_sample, m_coherent;
+    program::TableStorage m_host_tables;
+};
+
+NAMESPACE_END(diffraction_detail)
+NAMESPACE_END(mitsuba)
