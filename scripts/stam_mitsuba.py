@@ -13,8 +13,9 @@ points DRJIT_LIBLLVM_PATH at a libLLVM >= 17 and DRJIT_CACHE_DIR at
 <project>/.drjit-cache (unless set) and makes type="diffraction" loadable in
 every variant. Dr.Jit's flags stay its defaults.
 
-setup(variant) checks that the plugin is built and selects the variant; it
-returns the mitsuba module.
+setup(variant) checks that the plugin is built (and, for cuda_* variants, that
+Dr.Jit has a CUDA device) and selects the variant; it returns the mitsuba
+module.
 
 Run as a script (`python scripts/stam_mitsuba.py [variant]`, default scalar_rgb)
 it loads a compact disc BSDF and prints it: a check that the plugin loads.
@@ -33,6 +34,11 @@ def setup(variant='scalar_rgb'):
         raise FileNotFoundError('stam_mitsuba: %s not built (run `make plugin`)'
                                 % stam_diffraction.PLUGIN)
     import mitsuba as mi
+    if variant.startswith('cuda'):
+        import drjit as dr
+        if not dr.has_backend(dr.JitBackend.CUDA):
+            raise RuntimeError('stam_mitsuba: %s needs a CUDA device, and Dr.Jit has no '
+                               'CUDA backend here' % variant)
     mi.set_variant(variant)
     return mi
 

@@ -313,27 +313,6 @@ def test_warnings_name_implausible_values():
         assert b.warnings() == []
 
 
-def test_export_table_is_the_gaussian_rule_data():
-    """stam_brdf_export_table (docs/jit.md): Gaussian materials export the
-    "gaussian-v1" data (header, the Fresnel grid of a constant reflectance);
-    other models and "energy": "conserving" have none. The rule itself is
-    checked against the core in rust-core/tests/jit_export.rs and by
-    scripts/jit_prototype.py accuracy."""
-    with stam_core.Brdf(GAUSSIAN) as b:
-        e = b.export_table()
-    assert e is not None and e.dtype == np.float32
-    assert (e[0], e[1], e[2]) == (1.0, 1.0, 32.0) and int(e[3]) == len(e)
-    assert np.all(np.isfinite(e))
-    assert (e[4], e[5], e[6]) == (np.float32(0.05), np.float32(2.0), np.float32(2.0))
-    # Fresnel rows of F^2 = 0.5: every value 0.5.
-    rows, cols = int(e[19]), int(e[20]) + 1
-    fresnel = e[int(e[18]):int(e[18]) + rows * cols]
-    assert np.all(fresnel == np.float32(0.5))
-    for params in (FLAT, GRATING, dict(GAUSSIAN, energy='conserving')):
-        with stam_core.Brdf(params) as b:
-            assert b.export_table() is None
-
-
 # -- programs (stam_brdf_export_program, core.run_program) -----------------------
 
 ALL_MATERIALS = stam_materials.load()

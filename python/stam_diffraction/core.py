@@ -172,7 +172,6 @@ def lib():
                                                     fp, u8p, fp]),
         'stam_brdf_flags': (ctypes.c_uint32, [vp]),
         'stam_brdf_memory_bytes': (sz, [vp]),
-        'stam_brdf_export_table': (sz, [vp, fp, sz]),
         'stam_brdf_export_program': (sz, [vp, ctypes.c_uint32, fp, sz]),
         'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
         'stam_version': (ctypes.c_char_p, []),
@@ -260,19 +259,6 @@ class Brdf:
 
     def memory_bytes(self):
         return int(self._lib.stam_brdf_memory_bytes(self._handle()))
-
-    def export_table(self):
-        """The JIT export (stam_brdf_export_table; layout and rule in
-        docs/jit.md) as a float32 array, or None when the material has none
-        (only Gaussian surfaces with Stam's formula have one)."""
-        n = int(self._lib.stam_brdf_export_table(self._handle(), None, 0))
-        if n == 0:
-            return None
-        out = np.empty(n, dtype=np.float32)
-        written = int(self._lib.stam_brdf_export_table(self._handle(), _ptr(out), n))
-        if written != n:
-            raise RuntimeError('stam_diffraction.core: export_table wrote %d of %d' % (written, n))
-        return out
 
     def export_program(self, kind):
         """The program of `kind` (PROGRAM_EVAL_RGB .. PROGRAM_COHERENT_SPECTRAL;

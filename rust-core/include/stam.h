@@ -129,15 +129,6 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 #define STAM_SRGB_LUMINANCE_G 0.7152
 #define STAM_SRGB_LUMINANCE_B 0.0722
 
-/* JIT export (prototype; layout and rule "gaussian-v1" in docs/jit.md):
- * the tables over universal variables and the parameters from which a
- * renderer that traces its code (Dr.Jit) evaluates the material's diffuse
- * f with array operations. Returns the number of floats of the export, 0
- * when the material has none (only Gaussian surfaces with Stam's formula
- * have one) or b is NULL; writes them to out only when out is not NULL and
- * capacity is at least that number (call with out = NULL to size it). */
-size_t stam_brdf_export_table(const StamBrdf *b, float *out, size_t capacity);
-
 /* Programs for renderers that trace their code (Dr.Jit's symbolic loops
  * and calls, dr.freeze, CUDA; docs/jit.md): straight-line array operations
  * and the tables they read, which compute what the functions above compute.

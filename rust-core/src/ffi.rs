@@ -567,29 +567,6 @@ pub unsafe extern "C" fn stam_brdf_memory_bytes(b: *const StamBrdf) -> usize {
 /// # Safety
 /// `b` NULL or valid; `out` NULL or valid for `capacity` floats.
 #[no_mangle]
-pub unsafe extern "C" fn stam_brdf_export_table(
-    b: *const StamBrdf,
-    out: *mut f32,
-    capacity: usize,
-) -> usize {
-    if b.is_null() {
-        return 0;
-    }
-    catch_unwind(AssertUnwindSafe(|| {
-        let Some(table) = (*b).brdf.jit_export() else {
-            return 0;
-        };
-        if !out.is_null() && capacity >= table.len() {
-            std::ptr::copy_nonoverlapping(table.as_ptr(), out, table.len());
-        }
-        table.len()
-    }))
-    .unwrap_or(0)
-}
-
-/// # Safety
-/// `b` NULL or valid; `out` NULL or valid for `capacity` floats.
-#[no_mangle]
 pub unsafe extern "C" fn stam_brdf_export_program(
     b: *const StamBrdf,
     kind: u32,

@@ -10,7 +10,6 @@
 pub mod energy;
 #[cfg(test)]
 mod energy_tests;
-pub mod jit;
 pub mod params;
 pub mod plausibility;
 pub mod program;

@@ -290,25 +290,6 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     CHECK(19, stam_brdf_memory_bytes(b) > 0 && stam_brdf_memory_bytes(b) <= (4u << 20), "memory");
     CHECK(20, strlen(stam_version()) > 0, "version");
 
-    /* JIT export (docs/jit.md): sized with NULL, written only when the
-     * capacity suffices; Gaussian surfaces have one, NULL has none. */
-    size_t n_export = stam_brdf_export_table(b, NULL, 0);
-    CHECK(41, stam_brdf_export_table(NULL, NULL, 0) == 0, "export of NULL");
-    if (strstr(params_json, "gaussian") != NULL && strstr(params_json, "conserving") == NULL) {
-        CHECK(41, n_export > 32, "no JIT export for a Gaussian material");
-    }
-    if (n_export > 0) {
-        float *table = malloc(n_export * sizeof(float));
-        float small[4] = {-1.0f, -1.0f, -1.0f, -1.0f};
-        CHECK(41, table != NULL, "out of memory");
-        CHECK(41, stam_brdf_export_table(b, small, 4) == n_export && small[0] == -1.0f,
-              "export wrote into a buffer that is too small");
-        CHECK(41, stam_brdf_export_table(b, table, n_export) == n_export && table[0] == 1.0f &&
-                      table[3] == (float)n_export,
-              "export header");
-        free(table);
-    }
-
     {
         int code = check_export_program(b, params_json, report, report_len);
         if (code != 0) {

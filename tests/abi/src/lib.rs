@@ -184,10 +184,6 @@ mod tests {
             ffi::stam_brdf_memory_bytes as unsafe extern "C" fn(_) -> _,
         );
         same_signature(
-            h::stam_brdf_export_table as unsafe extern "C" fn(_, _, _) -> _,
-            ffi::stam_brdf_export_table as unsafe extern "C" fn(_, _, _) -> _,
-        );
-        same_signature(
             h::stam_brdf_export_program as unsafe extern "C" fn(_, _, _, _) -> _,
             ffi::stam_brdf_export_program as unsafe extern "C" fn(_, _, _, _) -> _,
         );

@@ -716,18 +716,6 @@ pub fn run(options: &Options) -> Report {
         unsafe {
             let _ = ffi::stam_brdf_flags(b);
             let _ = ffi::stam_brdf_memory_bytes(b);
-            // The JIT export: sized, then written whole.
-            let n = ffi::stam_brdf_export_table(b, std::ptr::null_mut(), 0);
-            if n > 0 {
-                let mut table = vec![0.0f32; n];
-                let written = ffi::stam_brdf_export_table(b, table.as_mut_ptr(), n);
-                if written != n || table[3] as usize != n || !table.iter().all(|v| v.is_finite()) {
-                    report.disagreements += 1;
-                    report.fail(format!(
-                        "stam_brdf_export_table: {written} of {n} floats or a non-finite one for {json}"
-                    ));
-                }
-            }
         }
         check_programs(&mut report, b, brdf, &json, &lanes);
         // The warnings: UTF-8, the Rust API's, one per line.
