@@ -37,7 +37,7 @@
 //! m is interpolated linearly between cell centres.
 
 use super::Brdf;
-use crate::models::EnergyHint;
+use crate::models::{EnergyHint, FactorProgram};
 use crate::optics::program::Vec3;
 use crate::program::{lookup, Builder, Value};
 use crate::sampling::warps::radical_inverse;
@@ -332,7 +332,8 @@ impl EnergyTable {
     }
 
     /// `pair(wi, wo).at(lambda)` for unit directions above the horizon;
-    /// `lambda_nm` None only for colour-neutral tables (else None).
+    /// `lambda_nm` None only for colour-neutral tables (else None). One
+    /// wavelength: 16 gathers (8 for a colour-neutral table).
     pub fn pair_program<'a>(
         &self,
         b: &'a Builder,
@@ -355,50 +356,22 @@ impl EnergyTable {
             }
             _ => (b.c(0.0), None),
         };
-        // m at a direction, at nodes q0 and q0 + 1 (as `factors`).
+        // m at a direction, at nodes q0 and q0 + 1.
         let factor = |d: Vec3<'a>| -> (Value<'a>, Value<'a>) {
-            let r = self.radial as f64;
-            let x = d[2].clamp(0.0, 1.0).sqrt() * r - 0.5;
-            let i0 = x.max(0.0).floor().min(r - 1.0);
-            let i1 = (i0 + 1.0).min(r - 1.0);
-            let fi = (x - i0).clamp(0.0, 1.0);
-            let n = self.azimuthal as f64;
-            let (j0, j1, fj) = if self.azimuthal == 1 {
-                (b.c(0.0), b.c(0.0), b.c(0.0))
-            } else {
-                let y = (d[1].atan2(d[0]) + PI) * (n / (2.0 * PI)) - 0.5;
-                let y = y.lt(0.0).select(y + n, y);
-                let j0 = y.floor().clamp(0.0, n - 1.0);
-                let j1 = (j0 + 1.0).ge(n).select(0.0, j0 + 1.0);
-                (j0, j1, (y - j0).clamp(0.0, 1.0))
-            };
-            let corners = [
-                (i0, j0, (1.0 - fi) * (1.0 - fj)),
-                (i0, j1, (1.0 - fi) * fj),
-                (i1, j0, fi * (1.0 - fj)),
-                (i1, j1, fi * fj),
-            ];
+            let corners = self.corners_program(b, d);
             let at = |q: Value<'a>| {
                 lookup::sum(
                     b,
-                    corners
-                        .iter()
-                        .map(|&(i, j, w)| w * b.gather(table, (i * n + j) * k as f64 + q)),
+                    corners.iter().map(|&(row, w)| w * b.gather(table, row + q)),
                 )
             };
             let lo = at(q0);
             let hi = if fq.is_some() { at(q0 + 1.0) } else { lo };
             (lo, hi)
         };
-        let taper = |cos: Value<'a>| {
-            let x = cos * (1.0 / self.taper_cos);
-            let inside = x * x * (3.0 - x * 2.0);
-            cos.ge(self.taper_cos)
-                .select(1.0, cos.gt(0.0).select(inside, 0.0))
-        };
         let (a0, a1) = factor(wi);
         let (b0, b1) = factor(wo);
-        let taper = taper(wi[2]) * taper(wo[2]);
+        let taper = self.taper_program(wi[2]) * self.taper_program(wo[2]);
         let p0 = a0 * b0 * taper;
         Some(match fq {
             Some(f) => {
@@ -407,6 +380,131 @@ impl EnergyTable {
             }
             None => p0,
         })
+    }
+
+    /// The pair's factor at every wavelength node, for programs that need
+    /// it at many wavelengths (a grating's RGB: three per order, and the
+    /// broad rule's nodes): the table's rows around wi and wo gathered once
+    /// (8 gathers per node), then linear in lambda by selects.
+    pub fn pair_factor_program<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+    ) -> PairFactorProgram<'a> {
+        let table = b.table(self.m.iter().map(|&v| v as f32).collect());
+        let (ci, co) = (self.corners_program(b, wi), self.corners_program(b, wo));
+        let m = |corners: &[(Value<'a>, Value<'a>); 4], q: usize| {
+            lookup::sum(
+                b,
+                corners
+                    .iter()
+                    .map(|&(row, w)| w * b.gather(table, row + q as f64)),
+            )
+        };
+        let taper = self.taper_program(wi[2]) * self.taper_program(wo[2]);
+        let product: Vec<Value<'a>> = (0..self.nodes)
+            .map(|q| m(&ci, q) * m(&co, q) * taper)
+            .collect();
+        // Per segment q: the slope d_q and the intercept product_q - q d_q.
+        let slope: Vec<Value<'a>> = product.windows(2).map(|p| p[1] - p[0]).collect();
+        let intercept = product
+            .iter()
+            .zip(&slope)
+            .enumerate()
+            .map(|(q, (&p, &d))| d.fma(-(q as f64), p))
+            .collect();
+        PairFactorProgram {
+            lambda_lo: self.lambda_lo,
+            lambda_step: self.lambda_step,
+            product,
+            slope,
+            intercept,
+        }
+    }
+
+    /// The four cells around a unit direction above the horizon (as
+    /// `factors`): each as the table index of its node 0, and its bilinear
+    /// weight.
+    fn corners_program<'a>(&self, b: &'a Builder, d: Vec3<'a>) -> [(Value<'a>, Value<'a>); 4] {
+        let r = self.radial as f64;
+        let x = d[2].clamp(0.0, 1.0).sqrt() * r - 0.5;
+        let i0 = x.max(0.0).floor().min(r - 1.0);
+        let i1 = (i0 + 1.0).min(r - 1.0);
+        let fi = (x - i0).clamp(0.0, 1.0);
+        let n = self.azimuthal as f64;
+        let (j0, j1, fj) = if self.azimuthal == 1 {
+            (b.c(0.0), b.c(0.0), b.c(0.0))
+        } else {
+            let y = (d[1].atan2(d[0]) + PI) * (n / (2.0 * PI)) - 0.5;
+            let y = y.lt(0.0).select(y + n, y);
+            let j0 = y.floor().clamp(0.0, n - 1.0);
+            let j1 = (j0 + 1.0).ge(n).select(0.0, j0 + 1.0);
+            (j0, j1, (y - j0).clamp(0.0, 1.0))
+        };
+        let k = self.nodes as f64;
+        [
+            (i0, j0, (1.0 - fi) * (1.0 - fj)),
+            (i0, j1, (1.0 - fi) * fj),
+            (i1, j0, fi * (1.0 - fj)),
+            (i1, j1, fi * fj),
+        ]
+        .map(|(i, j, w)| ((i * n + j) * k, w))
+    }
+
+    /// The horizon taper at a cosine.
+    fn taper_program<'a>(&self, cos: Value<'a>) -> Value<'a> {
+        let x = cos * (1.0 / self.taper_cos);
+        let inside = x * x * (3.0 - x * 2.0);
+        cos.ge(self.taper_cos)
+            .select(1.0, cos.gt(0.0).select(inside, 0.0))
+    }
+}
+
+/// `EnergyTable::pair_factor_program`: m(wi, lambda) m(wo, lambda) of one
+/// pair at the table's nodes, linear in between (as `PairEnergy::at`).
+pub struct PairFactorProgram<'a> {
+    lambda_lo: f64,
+    lambda_step: f64,
+    product: Vec<Value<'a>>,
+    /// Per segment q (nodes q, q + 1): the slope per node step and
+    /// product_q - q slope_q, so that the value at x (in node steps) is
+    /// intercept_q + slope_q x.
+    slope: Vec<Value<'a>>,
+    intercept: Vec<Value<'a>>,
+}
+
+impl<'a> FactorProgram<'a> for PairFactorProgram<'a> {
+    /// The segment by a chain of selects (3 operations per node).
+    fn at(&self, lambda_nm: Value<'a>) -> Value<'a> {
+        let k = self.product.len();
+        if k == 1 {
+            return self.product[0];
+        }
+        let x =
+            ((lambda_nm - self.lambda_lo) * (1.0 / self.lambda_step)).clamp(0.0, (k - 1) as f64);
+        let (mut a, mut d) = (self.intercept[0], self.slope[0]);
+        for q in 1..k - 1 {
+            let past = x.ge(q as f64);
+            a = past.select(self.intercept[q], a);
+            d = past.select(self.slope[q], d);
+        }
+        d.fma(x, a)
+    }
+
+    fn at_nm(&self, lambda_nm: f64) -> Value<'a> {
+        let k = self.product.len();
+        if k == 1 {
+            return self.product[0];
+        }
+        let x = ((lambda_nm - self.lambda_lo) / self.lambda_step).clamp(0.0, (k - 1) as f64);
+        let q = (x as usize).min(k - 2);
+        let f = x - q as f64;
+        if f == 0.0 {
+            self.product[q]
+        } else {
+            self.slope[q].fma(f, self.product[q])
+        }
     }
 }
 

@@ -146,12 +146,17 @@ fn stam_mode_is_the_default() {
 }
 
 /// The table as a program (EnergyTable::pair_program, what the JIT path
-/// multiplies f by) against `pair(wi, wo).at(lambda)`: per-wavelength
-/// (the compact disc) and colour-neutral (Gaussian, anisotropic), random
-/// and grazing directions.
+/// multiplies f by, and pair_factor_program, what a grating's RGB program
+/// multiplies at many wavelengths: at a program's wavelength and at fixed
+/// ones) against `pair(wi, wo).at(lambda)`: per-wavelength (the compact
+/// disc) and colour-neutral (Gaussian, anisotropic), random and grazing
+/// directions.
 #[test]
 fn energy_table_program_matches_native() {
+    use crate::models::FactorProgram;
     use crate::program::Builder;
+    // Fixed wavelengths: outside the table's range, on its nodes, between.
+    let fixed = [360.0, 380.0, 396.25, 512.3, 555.0, 780.0, 830.0];
     for json in [MATERIALS[0], MATERIALS[2], MATERIALS[4]] {
         let brdf = Brdf::from_json(json).unwrap();
         let table = brdf.energy_table().unwrap();
@@ -160,7 +165,10 @@ fn energy_table_program_matches_native() {
         let wo = [b.input(), b.input(), b.input()];
         let lambda = b.input();
         let out = table.pair_program(&b, wi, wo, Some(lambda)).unwrap();
-        let program = b.finish(&[out]);
+        let factor = table.pair_factor_program(&b, wi, wo);
+        let mut outputs = vec![out, factor.at(lambda)];
+        outputs.extend(fixed.map(|l| factor.at_nm(l)));
+        let program = b.finish(&outputs);
         // Without a wavelength: only colour-neutral tables have a program.
         let b2 = Builder::new();
         let up = [b2.c(0.0), b2.c(0.0), b2.c(1.0)];
@@ -177,9 +185,15 @@ fn energy_table_program_matches_native() {
             let wi = direction(cos_i.max(1e-4), 2.0 * PI * r[2]);
             let wo = direction(cos_o.max(1e-4), 2.0 * PI * rng.three()[0]);
             let lambda = 360.0 + 470.0 * rng.three()[1];
-            let native = table.pair(wi, wo).at(lambda);
-            let got = program.run(&[wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, lambda])[0];
-            worst = worst.max((got - native).abs());
+            let pair = table.pair(wi, wo);
+            let got = program.run(&[wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, lambda]);
+            let native = [lambda, lambda]
+                .into_iter()
+                .chain(fixed)
+                .map(|l| pair.at(l));
+            for (g, n) in got.iter().zip(native) {
+                worst = worst.max((g - n).abs());
+            }
         }
         println!("{json}: worst |program - native| = {worst:.2e}");
         // The table is exported in f32.

@@ -7,6 +7,7 @@
 //! (STAM_PROGRAM_*), the plugin's executor reads them in that order.
 
 use super::Brdf;
+use crate::models::FactorProgram;
 use crate::optics::program::{upper_direction, PairProgram, Vec3};
 use crate::program::{Builder, Mask, Program, Value};
 use crate::sampling::program::{cosine_density_program, cosine_direction_program};
@@ -69,13 +70,15 @@ fn band<'a>(lambda: Value<'a>) -> (Value<'a>, Mask<'a>) {
 }
 
 impl Brdf {
-    /// The program of `kind`; None where the material has none: a model
-    /// without that program, or the RGB kinds of "energy": "conserving"
-    /// with a table per wavelength (gratings: the factor would have to join
-    /// each order's integration over wavelength, which the models' RGB
-    /// programs do not take yet).
+    /// The program of `kind`; None where the material has none (a model
+    /// without that program). The energy scaling of "energy":
+    /// "conserving" multiplies f where it does natively: a colour-neutral
+    /// table's one factor outside the model's RGB, a table per wavelength
+    /// (gratings) inside it (`FactorProgram`, at each wavelength the
+    /// model's RGB integration takes).
     pub fn program(&self, kind: ProgramKind) -> Option<Program> {
         let energy = self.energy_table();
+        let per_wavelength = energy.filter(|e| !e.colour_neutral());
         let model = self.surface.programs();
         let shading = self.shading();
         let b = Builder::new();
@@ -84,9 +87,16 @@ impl Brdf {
                 let (wi, wo) = (input3(&b), input3(&b));
                 let pair = PairProgram::new(&b, wi, wo);
                 if kind == ProgramKind::EvalRgb {
-                    let rgb = model.reflectance_rgb_program(&b, &shading, &pair)?;
+                    let factor =
+                        per_wavelength.map(|e| e.pair_factor_program(&b, pair.wi, pair.wo));
+                    let rgb = model.reflectance_rgb_program(
+                        &b,
+                        &shading,
+                        &pair,
+                        factor.as_ref().map(|f| f as &dyn FactorProgram),
+                    )?;
                     // A colour-neutral factor commutes with the gamut map.
-                    let scale = match energy {
+                    let scale = match energy.filter(|e| e.colour_neutral()) {
                         Some(e) => {
                             pair.geometric_factor * e.pair_program(&b, pair.wi, pair.wo, None)?
                         }
@@ -148,8 +158,14 @@ impl Brdf {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
                 let mirror = [-wi[0], -wi[1], wi[2]];
                 let (rgb, lambda, ok) = if kind == ProgramKind::CoherentRgb {
-                    let mut rgb = model.coherent_rgb_program(&b, &shading, wi[2])?;
-                    if let Some(e) = energy {
+                    let factor = per_wavelength.map(|e| e.pair_factor_program(&b, wi, mirror));
+                    let mut rgb = model.coherent_rgb_program(
+                        &b,
+                        &shading,
+                        wi[2],
+                        factor.as_ref().map(|f| f as &dyn FactorProgram),
+                    )?;
+                    if let Some(e) = energy.filter(|e| e.colour_neutral()) {
                         let m = e.pair_program(&b, wi, mirror, None)?;
                         rgb = rgb.map(|c| c * m);
                     }

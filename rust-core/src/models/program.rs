@@ -16,6 +16,17 @@ pub struct SampleProgram<'a> {
     pub coherent: Mask<'a>,
 }
 
+/// A factor of the pair's f per wavelength (the energy scaling of a
+/// material whose table is per wavelength), which the RGB programs apply
+/// inside their wavelength integration, where the native path applies
+/// `Shading::pair_factor`.
+pub trait FactorProgram<'a> {
+    /// At a wavelength (nm) the program computes.
+    fn at(&self, lambda_nm: Value<'a>) -> Value<'a>;
+    /// At a fixed wavelength (nm), such as a rule's node (cheaper).
+    fn at_nm(&self, lambda_nm: f64) -> Value<'a>;
+}
+
 /// A model's programs. Directions are unit vectors above the horizon (the
 /// material checks them and zeroes its outputs elsewhere); wavelengths are
 /// inside the band where a model's output matters (outside it the material
@@ -48,12 +59,16 @@ pub trait SurfacePrograms {
     }
 
     /// `reflectance_rgb`: F^2 K integrated against the linear sRGB
-    /// matching functions (f / G), before gamut mapping.
+    /// matching functions (f / G), before gamut mapping; with `factor`
+    /// (the material's per-wavelength energy scaling) F^2 K factor. A model
+    /// that cannot take a factor returns None when given one (the material
+    /// gives one only for tables per wavelength: the periodic model's).
     fn reflectance_rgb_program<'a>(
         &self,
         _b: &'a Builder,
         _shading: &Shading,
         _pair: &PairProgram<'a>,
+        _factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
         None
     }
@@ -70,12 +85,15 @@ pub trait SurfacePrograms {
         Some(b.c(0.0))
     }
 
-    /// `coherent_rgb`, before gamut mapping.
+    /// `coherent_rgb`, before gamut mapping; `factor` as in
+    /// `reflectance_rgb_program` (at the mirror pair). Models without a
+    /// coherent lobe keep 0, whatever the factor.
     fn coherent_rgb_program<'a>(
         &self,
         b: &'a Builder,
         _shading: &Shading,
         _cos_i: Value<'a>,
+        _factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
         Some([b.c(0.0); 3])
     }

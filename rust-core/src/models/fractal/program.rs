@@ -31,7 +31,7 @@ use super::math::{LN_2PI, LN_PI};
 use super::profile::ProfileParts;
 use super::sampling::RadialProposal;
 use super::{Fractal, FractalSurface, LN_4PI2};
-use crate::models::{SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::{Builder, Table, Value};
@@ -216,12 +216,18 @@ impl SurfacePrograms for Fractal {
         Some(phi.exp_plus((ln_k - ln_w + ln_s) * 2.0 - LN_4PI2))
     }
 
+    /// Fractal tables are colour-neutral (the material scales outside): no
+    /// per-wavelength factor.
     fn reflectance_rgb_program<'a>(
         &self,
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
+        factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
+        if factor.is_some() {
+            return None;
+        }
         let f = &self.surface;
         let rule = shading.rgb_rule;
         let profile = ProfileProgram::new(b, f);

@@ -36,7 +36,7 @@ use super::rgb::{column_limits, node_samples, D_U, D_V, MAP_R};
 use super::sampling::{AlbedoTable, BECKMANN_MIN_G};
 use super::series::{prefilter_2d, series_table_export, SeriesTableExport, SPLINE_MARGIN};
 use super::{Gaussian, GaussianSurface, COHERENT_MAX_G};
-use crate::models::{RgbRule, SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorProgram, RgbRule, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::fresnel::Fresnel;
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
@@ -788,12 +788,18 @@ impl SurfacePrograms for Gaussian {
         Some(prefactor * series)
     }
 
+    /// Gaussian tables are colour-neutral (the material scales outside):
+    /// no per-wavelength factor.
     fn reflectance_rgb_program<'a>(
         &self,
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
+        factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
+        if factor.is_some() {
+            return None;
+        }
         let t = self.rgb_program_table(shading)?;
         Some(rgb_from_table(b, t, &self.surface, shading, pair))
     }
@@ -817,7 +823,11 @@ impl SurfacePrograms for Gaussian {
         b: &'a Builder,
         shading: &Shading,
         cos_i: Value<'a>,
+        factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
+        if factor.is_some() {
+            return None;
+        }
         let rule = shading.rgb_rule;
         let c2 = cos_i * cos_i * (4.0 * self.surface.sigma_um * self.surface.sigma_um);
         let values: Vec<Value> = rule

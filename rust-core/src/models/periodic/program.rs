@@ -13,7 +13,7 @@
 //!   trait's zero defaults are the native values.
 
 use super::{Model, Periodic, PeriodicSurface, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT};
-use crate::models::{SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::{Builder, Mask, Table, Value};
 use std::f64::consts::PI;
@@ -339,8 +339,9 @@ impl SurfacePrograms for Periodic {
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
+        factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
-        self.rgb_program(b, shading, pair)
+        self.rgb_program(b, shading, pair, factor)
     }
 
     fn sample_program<'a>(

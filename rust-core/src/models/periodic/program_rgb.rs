@@ -23,11 +23,16 @@
 //! Broad peaks (s > RGB_BROAD_SIGMA, near the mirror direction): the native
 //! 32-node rule over the orders that can be broad for the material (order
 //! 0 alone for the compact disc).
+//!
+//! The energy scaling of "energy": "conserving" (a factor per wavelength,
+//! `FactorProgram`) multiplies F^2 where the native path multiplies
+//! `Shading::pair_factor`: at each order's three fit nodes and at the
+//! broad rule's nodes.
 
 use super::program::{PowerAt, PowerProgram};
 use super::{Periodic, PeriodicSurface, RGB_BROAD_SIGMA, RGB_PEAK_HALF_WIDTH_SIGMAS};
 use super::{RGB_SMOOTH_NODES, RGB_TAIL_EXPONENT};
-use crate::models::Shading;
+use crate::models::{FactorProgram, Shading};
 use crate::optics::fresnel::Fresnel;
 use crate::optics::program::PairProgram;
 use crate::program::{Builder, Mask, Table, Value};
@@ -496,6 +501,7 @@ impl Periodic {
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
+        factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
         let p = &self.surface;
         let plan = RgbPlan::new(p)?;
@@ -504,6 +510,19 @@ impl Periodic {
         let (l, lam) = (p.coherence_um, p.period_um);
         let two_pi_l = 2.0 * PI * l;
         let refl = Reflectance::new(b, shading.fresnel, pair.cos_half);
+        // F^2 (1 when flat: applied at the end) times the factor, at a
+        // wavenumber and at a node of the broad rule.
+        let refl_at = |nu: Value<'a>| match (factor, refl.flat()) {
+            (None, _) => refl.at(b, nu),
+            (Some(f), Some(_)) => f.at(1000.0 / nu),
+            (Some(f), None) => refl.at(b, nu) * f.at(1000.0 / nu),
+        };
+        let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
+        let refl_at_node = |j: usize| match (factor, refl.flat()) {
+            (None, _) => refl.at_node(b, j),
+            (Some(f), Some(_)) => f.at_nm(rule.lambda_nm[j]),
+            (Some(f), None) => refl.at_node(b, j) * f.at_nm(rule.lambda_nm[j]),
+        };
         let rho2 = u * u + v * v;
         let positive = rho2.gt(0.0);
         let rho2 = positive.select(rho2, 1.0);
@@ -552,7 +571,7 @@ impl Periodic {
             let c = mu.max(a + delta).min(bb - delta);
             let s_at = |nu: Value<'a>| {
                 let beta = nu * w * (2.0 * PI);
-                refl.at(b, nu) * nu * nu * powers.power_rgb(b, beta, n)
+                refl_at(nu) * nu * nu * powers.power_rgb(b, beta, n)
             };
             let (sm, s0, sp) = (s_at(c - delta), s_at(c), s_at(c + delta));
             let inv_2d = 0.5 / delta;
@@ -574,7 +593,6 @@ impl Periodic {
         }
 
         // Broad peaks: the 32-node rule over orders -broad..=broad.
-        let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
         let orders: Vec<(f64, Mask<'a>)> = (-plan.broad..=plan.broad)
             .map(|n| (n as f64, peak(b.c(n as f64)).take))
             .collect();
@@ -590,7 +608,7 @@ impl Periodic {
                 let term = powers.power_const(b, &at, n as i64) * (-e).exp();
                 sum = sum + (take & e.lt(700.0)).select(term, 0.0);
             }
-            let val = refl.at_node(b, j) * (nu * nu) * c_const * sum;
+            let val = refl_at_node(j) * (nu * nu) * c_const * sum;
             for ch in 0..3 {
                 broad_sum[ch] = broad_sum[ch] + val * weights[ch];
             }
