@@ -433,18 +433,14 @@ def test_export_program_round_trip(entry):
 
 
 def test_energy_conserving_materials_export_programs():
-    """The energy table joins the programs (EnergyTable::pair_program): the
-    sampling, pdf and coherent kinds exist as for any material, except that a
-    grating's table per wavelength has no RGB eval or coherent program (its
-    factor would have to join each order's integration over wavelength)."""
+    """The energy table joins the programs (EnergyTable::pair_program; a
+    grating's table per wavelength joins each order's integration over
+    wavelength): every kind exists, as for any material."""
     F = stam_core
-    with F.Brdf(dict(GAUSSIAN, energy='conserving')) as b:
-        for k in range(F.PROGRAM_PDF_RGB, F.PROGRAM_KINDS):
-            assert b.export_program(k) is not None, k
-    with F.Brdf(dict(GRATING, energy='conserving')) as b:
-        for k in range(F.PROGRAM_PDF_RGB, F.PROGRAM_KINDS):
-            assert (b.export_program(k) is None) == (k == F.PROGRAM_COHERENT_RGB), k
-        assert b.export_program(F.PROGRAM_EVAL_RGB) is None
+    for params in (GAUSSIAN, GRATING):
+        with F.Brdf(dict(params, energy='conserving')) as b:
+            for k in range(F.PROGRAM_KINDS):
+                assert b.export_program(k) is not None, (params, k)
 
 
 def test_run_program_operations():
