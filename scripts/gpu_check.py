@@ -34,13 +34,16 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(ROOT, 'python'))
+import stam_accuracy as acc  # noqa: E402
 import stam_diffraction  # noqa: E402,F401  (plugin path, LLVM, Dr.Jit cache)
 from stam_diffraction import core as stam_core  # noqa: E402
 import stam_materials  # noqa: E402
 
 WAVELENGTHS = (450.0, 520.0, 590.0, 660.0)
-SPECTRAL_TOL = 1e-4      # relative, where f >= 1e-6 of its peak
-RGB_TOL = 1e-3           # of the pair's largest channel (f32 rounding of the RGB rule)
+# The issue's tolerances (scripts/stam_accuracy.py): spectral 1e-4 relative,
+# RGB the core's documented error of each model, both beyond the core's own
+# spread under one-ulp changes of the f32 inputs.
+SPECTRAL_TOL = acc.SPECTRAL_TOL
 
 
 def cuda_available(variant):
@@ -104,23 +107,23 @@ def check_accuracy(mi, dr, n):
         got = got.reshape(-1, n).T if got.ndim > 1 or got.size != n else got[:, None]
         got = got / wo[:, 2:3].astype(np.float32)
         core = stam_core.Brdf(params)
-        wi32, wo32 = wi.astype(np.float32), wo.astype(np.float32)
+        wi32, wo32 = acc.as_f32(wi), acc.as_f32(wo)
+        lam = np.broadcast_to(np.asarray(WAVELENGTHS, dtype=np.float32), (n, 4))
         if spectral:
-            ref = np.stack([core.eval_spectral(wi32, wo32, lam) for lam in WAVELENGTHS], axis=1)
-            peak = ref.max()
-            ok = ref >= 1e-6 * peak
-            err = float(np.max(np.abs(got - ref)[ok] / ref[ok])) if ok.any() else 0.0
-            tol = SPECTRAL_TOL
+            def f(a, o, lam):
+                return np.stack([core.eval_spectral(a, o, lam[:, j]) for j in range(4)], axis=1)
+            tol, axis = SPECTRAL_TOL, None
         else:
-            ref = core.eval_rgb(wi32, wo32)
-            scale = ref.max(axis=1)
-            ok = scale >= 1e-6 * scale.max()
-            err = float(np.max(np.abs(got - ref)[ok] / scale[ok, None])) if ok.any() else 0.0
-            tol = RGB_TOL
+            def f(a, o, _lam):
+                return core.eval_rgb(a, o)
+            tol, axis = acc.RGB_DOCUMENTED[stam_materials.model_of(params)], 1
+        ref = f(wi32, wo32, lam)
+        spread = acc.conditioning(f, ref, (wi32, wo32, lam), axis)
+        err = float(np.max(acc.relative_errors(got, ref, axis) - spread))
         bad = not (np.all(np.isfinite(got)) and np.all(got >= 0))
         status = 'FAIL' if (err > tol or bad) else 'ok'
-        print('[gpu_check] accuracy %-24s max rel. error %.2e (tolerance %.0e)  %s'
-              % (m['name'], err, tol, status), flush=True)
+        print('[gpu_check] accuracy %-24s max rel. error beyond the f32 inputs\' spread '
+              '%.2e (tolerance %.1e)  %s' % (m['name'], err, tol, status), flush=True)
         if status != 'ok':
             failed.append('accuracy ' + m['name'])
     return failed
@@ -137,8 +140,6 @@ def check_chi2(mi, dr, quick):
             continue
         bsdf = mi.load_dict({'type': 'diffraction', **stam_materials.plugin_params(m['params'])})
         for name, wi in wis.items():
-            if name == 'normal' and m['model'] == 'periodic':
-                continue  # a sharp order-0 peak on the pole of Mitsuba's grid
             def make(n):
                 si = dr.zeros(mi.SurfaceInteraction3f, n)
                 si.wi = wi
@@ -160,7 +161,9 @@ def check_chi2(mi, dr, quick):
                                          sample_func=sample_func, pdf_func=pdf_func,
                                          sample_dim=3,
                                          sample_count=100000 if quick else 400000,
-                                         res=101, ires=8)
+                                         res=101,
+                                         # gratings' narrow peaks: more points per cell
+                                         ires=32 if m['model'] == 'periodic' else 8)
             ok = test.run()
             print('[gpu_check] chi2 %-22s %-8s %s' % (m['name'], name, 'ok' if ok else 'FAIL'),
                   flush=True)
