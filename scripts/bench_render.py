@@ -20,6 +20,7 @@ calls: Mitsuba's default mode), the plugin executing the core's programs
 the kernel from Dr.Jit's cache) is not timed.
 """
 import argparse
+import gc
 import json
 import os
 import statistics
@@ -67,16 +68,24 @@ def scene(mi, bsdf, size, spp):
 def time_renders(mi, materials, size, spp, repeats):
     """Fastest of `repeats` renders per material. The rounds are interleaved
     (every material once per round), so that a slow spell of the shared
-    machine hits all of them alike instead of one material's renders."""
-    scenes = {name: scene(mi, bsdf, size, spp) for name, bsdf in materials.items()}
-    for s in scenes.values():  # warm-up: lazily built tables, caches, kernels
-        mi.render(s, spp=spp, seed=0)
-    best = {name: float('inf') for name in scenes}
+    machine hits all of them alike instead of one material's renders.
+
+    Only one scene exists at a time: in JIT variants a symbolic virtual call
+    traces every BSDF registered in the variant, so with all the scenes alive
+    each kernel would carry every material's code (the baseline's too: it
+    measured 3.6x slower that way). Each round builds the scene afresh and
+    renders it once untimed (tables, tracing, the kernel from Dr.Jit's
+    cache), then times one render."""
+    best = {name: float('inf') for name in materials}
     for r in range(repeats):
-        for name, s in scenes.items():
+        for name, bsdf in materials.items():
+            s = scene(mi, bsdf, size, spp)
+            mi.render(s, spp=spp, seed=0)
             t = time.perf_counter()
-            mi.render(s, spp=spp, seed=r)
+            mi.render(s, spp=spp, seed=r + 1)
             best[name] = min(best[name], time.perf_counter() - t)
+            del s
+            gc.collect()
     return best
 
 

@@ -934,14 +934,19 @@ def test_decoder_refuses_malformed_arrays(decoder, tmp_path):
 SCENES_DIR = os.path.join(ROOT, 'scenes')
 
 
+@pytest.mark.parametrize('variant', [None, 'llvm_ad_spectral'])
 @pytest.mark.parametrize('scene', sorted(f for f in os.listdir(SCENES_DIR) if f.endswith('.xml')))
-def test_mitsuba_command_renders_the_scene_with_its_default_variant(scene, tmp_path):
+def test_mitsuba_command_renders_the_scene(scene, variant, tmp_path):
+    """`mitsuba` with its default variant (None: llvm_ad_rgb where LLVM is
+    present) and with llvm_ad_spectral, Dr.Jit's default flags."""
     path = os.path.join(SCENES_DIR, scene)
     out = str(tmp_path / (scene[:-4] + '.exr'))
     exe = os.path.join(os.path.dirname(sys.executable), 'mitsuba')
     env = dict(os.environ)
-    r = subprocess.run([exe, '-a', 'build', '-Dspp=2', '-Dres=24', '-o', out, path],
-                       cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    cmd = [exe, '-a', 'build', '-Dspp=2', '-Dres=24', '-o', out, path]
+    if variant:
+        cmd[1:1] = ['-m', variant]
+    r = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     use('llvm_ad_rgb')
     img = np.array(mi.Bitmap(out), dtype=np.float64)
