@@ -335,20 +335,23 @@ def _names(entries):
     return [e['name'] for e in entries]
 
 
-def _assemble(n_inputs, code, outputs, tables=()):
+def _assemble(n_inputs, code, outputs, tables=(), params=()):
     """A program array from its parts, in the layout core.decode_program
-    reads (format 2): code is a list of (op name or code, a, b, c)."""
+    reads (format 3): code is a list of (op name or code, a, b, c); params
+    (name, value) pairs."""
     ops = [(stam_core.PROGRAM_OPS.index(op) if isinstance(op, str) else op, a, b, c)
            for op, a, b, c in code]
-    n_out, n_tab = len(outputs), len(tables)
-    data_at = stam_core.PROGRAM_HEADER_LEN + n_out + 2 * n_tab + 4 * len(ops)
+    n_out, n_tab, n_par = len(outputs), len(tables), len(params)
+    data_at = stam_core.PROGRAM_HEADER_LEN + n_out + 2 * n_tab + 2 * n_par + 4 * len(ops)
     total = data_at + sum(len(t) for t in tables)
-    v = [stam_core.PROGRAM_FORMAT, n_inputs, n_out, len(ops), n_tab, total, 0, 0]
+    v = [stam_core.PROGRAM_FORMAT, n_inputs, n_out, len(ops), n_tab, total, n_par, 0]
     v += list(outputs)
     offset = data_at
     for t in tables:
         v += [offset, len(t)]
         offset += len(t)
+    for name, value in params:
+        v += [stam_core.PROGRAM_PARAMS.index(name), value]
     for op, a, b, c in ops:
         v += [op, a, b, c]
     for t in tables:
@@ -412,7 +415,7 @@ def test_program_constants_are_the_header_and_the_core():
 
 @pytest.mark.parametrize('entry', ALL_MATERIALS, ids=_names(ALL_MATERIALS))
 def test_export_program_round_trip(entry):
-    """Every kind a material exports is a float32 array of format 2 with the
+    """Every kind a material exports is a float32 array of format 3 with the
     kind's inputs and outputs that decodes and assembles back to the same
     values; the sampling, pdf and coherent kinds exist for every material;
     a kind that is not one gives None."""
@@ -430,7 +433,7 @@ def test_export_program_round_trip(entry):
             assert (p.n_inputs, len(p.outputs)) == F.PROGRAM_IO[kind]
             code = [(op, float(a_) if op == F.PROGRAM_OPS.index('Const') else a_, b_, c_)
                     for op, a_, b_, c_ in p.code]
-            back = _assemble(p.n_inputs, code, p.outputs, p.tables)
+            back = _assemble(p.n_inputs, code, p.outputs, p.tables, p.params)
             assert np.array_equal(back.view(np.uint32), a.view(np.uint32))
             assert np.array_equal(b.export_program(kind), a)
         for kind in (F.PROGRAM_KINDS, F.PROGRAM_KINDS + 1000, 2 ** 32 - 1, -1, 2 ** 32, 2 ** 40):
@@ -537,6 +540,54 @@ def test_decode_program_refuses_malformed_arrays():
             pytest.fail(what)
     with pytest.raises(ValueError):
         F.decode_program(good.reshape(1, -1))
+
+
+def test_program_parameters():
+    """Param reads its slot of the parameter section (the stored value, or
+    run_program's params= override, the same for every lane); decode_program
+    refuses unknown or repeated ids, non-finite values and Params beyond the
+    section; a Gaussian material's spectral eval program run with sigma_um
+    and corr_um changed by 2% gives the changed material's eval_spectral."""
+    F = stam_core
+    # r0 = x, r1 = sigma, r2 = corr, r3 = x * sigma, r4 = r3 + corr
+    a = _assemble(1, [('Input', 0, 0, 0), ('Param', 0, 0, 0), ('Param', 1, 0, 0),
+                      ('Mul', 0, 1, 0), ('Add', 3, 2, 0)], [4],
+                  params=[('sigma_um', 0.5), ('corr_um', 2.0)])
+    p = F.decode_program(a)
+    assert [n for n, _ in p.params] == ['sigma_um', 'corr_um']
+    assert F.run_program(a, [[1.0], [3.0]])[:, 0].tolist() == [2.5, 3.5]
+    assert F.run_program(a, [[1.0], [3.0]], params={'corr_um': 1.0})[:, 0].tolist() == [1.5, 2.5]
+    with pytest.raises(ValueError, match='twist'):
+        F.run_program(a, [1.0], params={'twist': 1.0})
+    par_at = 8 + 1
+
+    def broken(i, value):
+        v = a.copy()
+        v[i] = value
+        return v
+    for what, v in {'an unknown id': broken(par_at, len(F.PROGRAM_PARAMS)),
+                    'a repeated id': broken(par_at + 2, 0.0),
+                    'a NaN value': broken(par_at + 1, np.nan),
+                    'a Param beyond the section': broken(par_at + 4 + 4 * 2 + 1, 2.0)}.items():
+        with pytest.raises(ValueError, match='not a program array'):
+            F.decode_program(v)
+            pytest.fail(what)
+    sigma, corr = 0.1, 2.0
+    wi, wo = _pairs(4000, 3)
+    lam = np.float32(550.0)
+    with F.Brdf({'surface': 'gaussian', 'sigma_um': sigma, 'corr_um': corr,
+                 'fresnel': 0.9}) as b:
+        prog = b.export_program(F.PROGRAM_EVAL_SPECTRAL)
+    assert sorted(n for n, _ in F.decode_program(prog).params) == ['corr_um', 'sigma_um']
+    x = np.concatenate([wi, wo, np.full((len(wi), 1), lam)], axis=1)
+    for name, value in (('sigma_um', sigma * 1.02), ('corr_um', corr * 0.98)):
+        changed = {'sigma_um': sigma, 'corr_um': corr, name: value}
+        with F.Brdf({'surface': 'gaussian', 'fresnel': 0.9, **changed}) as c:
+            want = c.eval_spectral(wi, wo, lam)
+        got = F.run_program(prog, x, params={name: value})[:, 0]
+        ok = want > 1e-6 * want.max()
+        assert ok.sum() > 300
+        assert np.max(np.abs(got[ok] - want[ok]) / want[ok]) < 1e-4, name
 
 
 @pytest.mark.parametrize('entry', ALL_MATERIALS, ids=_names(ALL_MATERIALS))

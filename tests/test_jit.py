@@ -207,41 +207,46 @@ def export_program(brdf, kind):
 # Operation codes of the core's programs (rust-core/src/program/mod.rs, Op).
 PROGRAM_OPS = ('input', 'const', 'add', 'sub', 'mul', 'div', 'min', 'max', 'fma', 'neg',
                'abs', 'sqrt', 'exp', 'log', 'sin', 'cos', 'atan2', 'floor', 'lt', 'le', 'gt',
-               'ge', 'eq', 'finite', 'and', 'or', 'not', 'select', 'gather')
-PROGRAM_FORMAT = 2
+               'ge', 'eq', 'finite', 'and', 'or', 'not', 'select', 'gather', 'param')
+PROGRAM_FORMAT = 3
 PROGRAM_HEADER_LEN = 8
 
 
 def program_stats(v):
-    """{'inputs', 'outputs', 'instructions', 'gathers', 'tables', 'table_values'}
+    """{'inputs', 'outputs', 'instructions', 'gathers', 'tables', 'table_values',
+    'params'}
     of an exported program array (its header and code, unchecked)."""
     v = np.asarray(v, dtype=np.float32)
-    n_out, n_code, n_tab = int(v[2]), int(v[3]), int(v[4])
-    code_at = PROGRAM_HEADER_LEN + n_out + 2 * n_tab
+    n_out, n_code, n_tab, n_par = int(v[2]), int(v[3]), int(v[4]), int(v[6])
+    code_at = PROGRAM_HEADER_LEN + n_out + 2 * n_tab + 2 * n_par
     ops = v[code_at:code_at + 4 * n_code:4].astype(int)
-    lens = v[PROGRAM_HEADER_LEN + n_out + 1:code_at:2].astype(int)
+    lens = v[PROGRAM_HEADER_LEN + n_out + 1:PROGRAM_HEADER_LEN + n_out + 2 * n_tab:2].astype(int)
     return {'inputs': int(v[1]), 'outputs': n_out, 'instructions': n_code,
             'gathers': int(np.sum(ops == PROGRAM_OPS.index('gather'))), 'tables': n_tab,
-            'table_values': int(lens.sum())}
+            'table_values': int(lens.sum()), 'params': n_par}
 
 
-def run_program(v, inputs, dtype=np.float64, elementary=None):
+def run_program(v, inputs, dtype=np.float64, elementary=None, params=None):
     """Run an exported program array on the CPU with numpy, lane by lane as
     the core's executor (program::Program::run, rust-core/src/program/
     interpret.rs): inputs is a sequence of n_inputs arrays (broadcast
     together); returns the list of outputs. The reference of the plugin's
     executor (mitsuba-plugin/program.h). elementary: {op: function} for
-    some of exp, log, sin, cos, atan2 (default numpy's)."""
+    some of exp, log, sin, cos, atan2 (default numpy's). params: values by
+    parameter slot in place of the stored ones."""
     v = np.asarray(v, dtype=np.float32)
     if len(v) < PROGRAM_HEADER_LEN or int(v[0]) != PROGRAM_FORMAT or int(v[5]) != len(v):
         raise ValueError('not a program array of format %d'
                          % PROGRAM_FORMAT)
     n_in, n_out, n_code, n_tab = (int(x) for x in v[1:5])
+    n_par = int(v[6])
     if len(inputs) != n_in:
         raise ValueError('the program takes %d inputs, %d given'
                          % (n_in, len(inputs)))
     dir_at = PROGRAM_HEADER_LEN + n_out
-    code_at = dir_at + 2 * n_tab
+    par_at = dir_at + 2 * n_tab
+    code_at = par_at + 2 * n_par
+    values = v[par_at + 1:code_at:2] if params is None else params
     tables = [v[int(v[dir_at + 2 * t]):int(v[dir_at + 2 * t]) + int(v[dir_at + 2 * t + 1])]
               for t in range(n_tab)]
     ins = np.broadcast_arrays(*[np.asarray(x, dtype=dtype) for x in inputs])
@@ -256,6 +261,8 @@ def run_program(v, inputs, dtype=np.float64, elementary=None):
             a, b, c = (int(x) for x in w[1:])
             if op == 'input':
                 r = ins[a]
+            elif op == 'param':
+                r = dtype(values[a])
             elif op == 'gather':
                 t = tables[a]
                 x = np.asarray(regs[b], dtype=np.float64)
@@ -879,7 +886,7 @@ def test_decoder_refuses_malformed_arrays(decoder, tmp_path):
     v = np.asarray(v, dtype=np.float32)
     st = program_stats(v)
     n_out, n_code, n_tab = st['outputs'], st['instructions'], st['tables']
-    code_at = 8 + n_out + 2 * n_tab
+    code_at = 8 + n_out + 2 * n_tab + 2 * st['params']
 
     def with_(i, x):
         w = v.copy()
@@ -891,10 +898,10 @@ def test_decoder_refuses_malformed_arrays(decoder, tmp_path):
     first_mask_op = next(op_at[o][0] for o in ('lt', 'le', 'gt', 'ge', 'finite') if op_at[o])
     bad = {
         'empty': v[:0], 'truncated header': v[:5], 'truncated': v[:-1],
-        'format': with_(0, 3), 'format NaN': with_(0, float('nan')),
+        'format': with_(0, 2), 'format NaN': with_(0, float('nan')),
         'length': with_(5, len(v) + 1), 'negative count': with_(3, -1),
         'fractional count': with_(2, 1.5), 'huge count': with_(3, 1e9),
-        'unknown op': with_(code_at, 29), 'op NaN': with_(code_at, float('nan')),
+        'unknown op': with_(code_at, len(PROGRAM_OPS)), 'op NaN': with_(code_at, float('nan')),
         'forward reference': with_(first_binary + 1, first_binary // 4),
         'self reference': with_(first_binary + 1, (first_binary - code_at) // 4),
         'mask as float': with_(first_binary + 1, (first_mask_op - code_at) // 4),

@@ -111,21 +111,26 @@ PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
               PROGRAM_SAMPLE_RGB: (6, 4), PROGRAM_SAMPLE_SPECTRAL: (7, 4),
               PROGRAM_COHERENT_RGB: (3, 4), PROGRAM_COHERENT_SPECTRAL: (4, 2)}
 
-# The program array (format 2; rust-core/src/program/encode.rs): a header of
+# The program array (format 3; rust-core/src/program/encode.rs): a header of
 # PROGRAM_HEADER_LEN values (format, inputs, outputs, instructions, tables,
-# total length, 0, 0), the output registers, (offset, length) per table, four
-# values per instruction (op code, a, b, c; a Const's a is its value), then
-# the tables' values. Integers are stored as floats.
-PROGRAM_FORMAT = 2
+# total length, parameters, 0), the output registers, (offset, length) per
+# table, (id, value) per parameter (PROGRAM_PARAMS; a Param's a is its slot
+# in this list), four values per instruction (op code, a, b, c; a Const's a
+# is its value), then the tables' values. Integers are stored as floats.
+PROGRAM_FORMAT = 3
 PROGRAM_HEADER_LEN = 8
 # Operation codes, in code order (rust-core/src/program/mod.rs, enum Op).
 PROGRAM_OPS = ('Input', 'Const', 'Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Fma', 'Neg',
                'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos', 'Atan2', 'Floor', 'Lt', 'Le', 'Gt',
-               'Ge', 'Eq', 'Finite', 'And', 'Or', 'Not', 'Select', 'Gather')
+               'Ge', 'Eq', 'Finite', 'And', 'Or', 'Not', 'Select', 'Gather', 'Param')
+# Parameter ids, in code order (rust-core/src/program/mod.rs, enum ParamId;
+# stam.h's STAM_PARAM_*): the material parameters' names.
+PROGRAM_PARAMS = ('sigma_um', 'corr_um', 'corr_x_um', 'corr_y_um', 'lag_um', 'period_um',
+                  'height_um', 'width_um', 'coherence_um', 'twist', 'fresnel', 'eta', 'k')
 _OP = {name: code for code, name in enumerate(PROGRAM_OPS)}
 _GIVES_MASK = frozenset(_OP[n] for n in ('Lt', 'Le', 'Gt', 'Ge', 'Eq', 'Finite', 'And', 'Or',
                                          'Not'))
-_ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const')]
+_ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const', 'Param')]
               + [(_OP[n], 1) for n in ('Neg', 'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos',
                                        'Floor', 'Finite', 'Not', 'Gather')]
               + [(_OP[n], 2) for n in ('Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Atan2',
@@ -133,9 +138,11 @@ _ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const')]
               + [(_OP[n], 3) for n in ('Fma', 'Select')])
 
 # A decoded program: n_inputs; outputs (registers); code, a list of
-# (op, a, b, c) with a Const's a its float32 value and a Gather's a its
-# table; tables, float32 arrays.
-Program = collections.namedtuple('Program', 'n_inputs outputs code tables')
+# (op, a, b, c) with a Const's a its float32 value, a Gather's a its table
+# and a Param's a its parameter slot; tables, float32 arrays; params, a
+# tuple of (name, float32 value) per slot (names: PROGRAM_PARAMS).
+Program = collections.namedtuple('Program', 'n_inputs outputs code tables params',
+                                 defaults=((),))
 
 _lib = None
 
@@ -455,9 +462,10 @@ class Brdf:
 def decode_program(array):
     """The Program of an array of export_program, checked as the core's
     decode checks it (rust-core/src/program/encode.rs): format, length,
-    sections inside the array, every operand a register defined before its
-    use and of the right kind (float or mask), outputs floats. Raises
-    ValueError otherwise."""
+    sections inside the array, parameters known ids (each once) with finite
+    values, every Param reading one, every operand a register defined
+    before its use and of the right kind (float or mask), outputs floats.
+    Raises ValueError otherwise."""
     v = np.asarray(array)
     if v.ndim != 1:
         raise ValueError('stam_diffraction.core: a program is a 1-D array, not %s' % (v.shape,))
@@ -476,12 +484,15 @@ def decode_program(array):
         raise bad('%d values, shorter than the header' % len(v))
     if integer(v[0], 'the format') != PROGRAM_FORMAT:
         raise bad('format %g, not %d' % (v[0], PROGRAM_FORMAT))
-    n_inputs, n_out, n_code, n_tab, total = (integer(v[i], 'header value %d' % i)
-                                             for i in range(1, 6))
+    n_inputs, n_out, n_code, n_tab, total, n_par = (integer(v[i], 'header value %d' % i)
+                                                    for i in range(1, 7))
     if total != len(v):
         raise bad('length %d, the header says %d' % (len(v), total))
+    if v[7] != 0:
+        raise bad('header value 7 is %r, not 0' % float(v[7]))
     directory = PROGRAM_HEADER_LEN + n_out
-    code_at = directory + 2 * n_tab
+    par_at = directory + 2 * n_tab
+    code_at = par_at + 2 * n_par
     code_end = code_at + 4 * n_code
     if code_end > total:
         raise bad('%d instructions and %d tables do not fit' % (n_code, n_tab))
@@ -492,6 +503,15 @@ def decode_program(array):
         if off < code_end or off + length > total:
             raise bad('table %d at %d..%d' % (t, off, off + length))
         tables.append(v[off:off + length].copy())
+    params = []
+    for k in range(n_par):
+        pid = integer(v[par_at + 2 * k], 'parameter %d id' % k)
+        if pid >= len(PROGRAM_PARAMS) or PROGRAM_PARAMS[pid] in (n for n, _ in params):
+            raise bad('parameter %d has the id %d' % (k, pid))
+        value = np.float32(v[par_at + 2 * k + 1])
+        if not np.isfinite(value):
+            raise bad('parameter %d (%s) is %r' % (k, PROGRAM_PARAMS[pid], float(value)))
+        params.append((PROGRAM_PARAMS[pid], value))
     code, is_mask = [], []
     for i in range(n_code):
         w = v[code_at + 4 * i:code_at + 4 * i + 4]
@@ -504,6 +524,8 @@ def decode_program(array):
             raise bad('instruction %d reads input %d of %d' % (i, a, n_inputs))
         if op == _OP['Gather'] and a >= n_tab:
             raise bad('instruction %d gathers from table %d of %d' % (i, a, n_tab))
+        if op == _OP['Param'] and a >= n_par:
+            raise bad('instruction %d reads parameter %d of %d' % (i, a, n_par))
         operands = [b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]]
         for k, r in enumerate(operands):
             wants_mask = (op in (_OP['And'], _OP['Or'], _OP['Not'])
@@ -518,7 +540,7 @@ def decode_program(array):
         if r >= n_code or is_mask[r]:
             raise bad('output %d is register %d' % (k, r))
         outputs.append(r)
-    return Program(n_inputs, tuple(outputs), code, tables)
+    return Program(n_inputs, tuple(outputs), code, tables, tuple(params))
 
 
 def _fma32(a, b, c):
@@ -536,10 +558,13 @@ def _fma32(a, b, c):
     return s.astype(np.float32)
 
 
-def run_program(program, inputs):
+def run_program(program, inputs, params=None):
     """Runs a program (an array of Brdf.export_program, or a decoded
     Program) on lanes of inputs (..., n_inputs): float32 outputs (...,
-    n_outputs). Every operation as the core's executor
+    n_outputs). params: {name: value} overriding the values the program's
+    parameters were built with (names: PROGRAM_PARAMS; a name the program
+    does not read is an error); Param gives the value (float32) to every
+    lane. Every operation as the core's executor
     (rust-core/src/program/interpret.rs) does it, in float32: +, -, *, /,
     sqrt, floor correctly rounded; min/max return the other operand where
     one is NaN (the sign of a zero they return is unspecified, as there);
@@ -556,6 +581,13 @@ def run_program(program, inputs):
                          % (p.n_inputs, x.shape))
     shape = x.shape[:-1]
     x = x.reshape(-1, p.n_inputs)
+    values = [value for _, value in p.params]
+    names = [name for name, _ in p.params]
+    for name, value in (params or {}).items():
+        if name not in names:
+            raise ValueError('stam_diffraction.core: the program reads no parameter %r (it reads %s)'
+                             % (name, ', '.join(names) or 'none'))
+        values[names.index(name)] = np.float32(value)
     # Registers are dropped after their last reader (memory: the live
     # registers times the lanes, not the program's length).
     reads = [[b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]] for op, a, b, c in p.code]
@@ -582,6 +614,8 @@ def run_program(program, inputs):
                 v = x[:, a]
             elif name == 'Const':
                 v = np.asarray(a, dtype=f32)
+            elif name == 'Param':
+                v = np.asarray(values[a], dtype=f32)
             elif name == 'Add':
                 v = r[a] + r[b]
             elif name == 'Sub':

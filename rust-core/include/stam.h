@@ -133,7 +133,7 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
  * and calls, dr.freeze, CUDA; docs/jit.md): straight-line array operations
  * and the tables they read, which compute what the functions above compute.
  * Layout of the float array and the operation codes: docs/jit.md (format
- * 2). Each kind takes its inputs and gives its outputs in this order
+ * 3). Each kind takes its inputs and gives its outputs in this order
  * (directions in the local frame, lambda in nm, u uniforms in [0, 1)):
  *   EVAL_RGB          wi[3] wo[3]        -> f R, G, B (no cos, no coherent lobe)
  *   EVAL_SPECTRAL     wi[3] wo[3] lambda -> f
@@ -158,6 +158,26 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 #define STAM_PROGRAM_KINDS 8u
 size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
                                 size_t capacity);
+
+/* Material parameters a program reads through its parameter op (Param,
+ * code 29): the array's parameter section lists (id, value) pairs, the
+ * value the program was built with; a renderer may substitute its own
+ * (a differentiated or textured value, the same units). Ids are stable;
+ * new ones are appended. */
+#define STAM_PARAM_SIGMA_UM 0u
+#define STAM_PARAM_CORR_UM 1u /* an isotropic surface's (both axes) */
+#define STAM_PARAM_CORR_X_UM 2u
+#define STAM_PARAM_CORR_Y_UM 3u
+#define STAM_PARAM_LAG_UM 4u
+#define STAM_PARAM_PERIOD_UM 5u
+#define STAM_PARAM_HEIGHT_UM 6u
+#define STAM_PARAM_WIDTH_UM 7u
+#define STAM_PARAM_COHERENCE_UM 8u
+#define STAM_PARAM_TWIST 9u
+#define STAM_PARAM_FRESNEL 10u /* the constant reflectance */
+#define STAM_PARAM_ETA 11u
+#define STAM_PARAM_K 12u
+#define STAM_PARAMS 13u
 
 /* Plausibility warnings of the material's parameters, one per line (no
  * trailing newline), "" when there are none or b is NULL: values that were

@@ -1,7 +1,7 @@
 //! Writing a program as formulas: [`Value`] and [`Mask`] are handles to
 //! registers of a [`Builder`] and overload the arithmetic operators.
 
-use super::{Instr, Op, Program};
+use super::{Instr, Op, ParamId, Program};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
@@ -12,6 +12,8 @@ struct State {
     consts: HashMap<u32, u32>,
     tables: Vec<Vec<f32>>,
     n_inputs: u32,
+    /// Parameters by slot, and the register of each.
+    params: Vec<(ParamId, f32, u32)>,
 }
 
 /// Collects the instructions of one program.
@@ -86,6 +88,25 @@ impl Builder {
         self.value(id)
     }
 
+    /// The material parameter `id`, whose value is `value` (rounded to
+    /// f32) for the material the program is built for: an `Op::Param`
+    /// register (one per id), so that a renderer can change the value
+    /// without rebuilding the program (differentiate it, texture it).
+    pub fn param(&self, id: ParamId, value: f64) -> Value<'_> {
+        let value = value as f32;
+        if let Some(&(_, v, reg)) = self.state.borrow().params.iter().find(|p| p.0 == id) {
+            debug_assert!(
+                v.to_bits() == value.to_bits(),
+                "parameter {id:?} given as {v} and {value}"
+            );
+            return self.value(reg);
+        }
+        let slot = self.state.borrow().params.len() as u32;
+        let reg = self.push(Op::Param, slot, 0, 0);
+        self.state.borrow_mut().params.push((id, value, reg));
+        self.value(reg)
+    }
+
     /// A table the program gathers from.
     pub fn table(&self, values: Vec<f32>) -> Table {
         let mut s = self.state.borrow_mut();
@@ -130,6 +151,7 @@ impl Builder {
         let mut new_id = vec![u32::MAX; n];
         let mut table_id = vec![u32::MAX; s.tables.len()];
         let mut tables = Vec::new();
+        let mut params = Vec::new();
         let mut code = Vec::new();
         let mut inputs_seen = 0;
         let mut tables_in = s.tables.into_iter().map(Some).collect::<Vec<_>>();
@@ -144,6 +166,11 @@ impl Builder {
             let mut out = *ins;
             match ins.op {
                 Op::Input | Op::Const => {}
+                Op::Param => {
+                    let (id, value, _) = s.params[ins.a as usize];
+                    out.a = params.len() as u32;
+                    params.push((id, value));
+                }
                 Op::Gather => {
                     let t = ins.a as usize;
                     if table_id[t] == u32::MAX {
@@ -174,6 +201,7 @@ impl Builder {
             code,
             outputs: outputs.iter().map(|o| new_id[o.id as usize]).collect(),
             tables,
+            params,
         }
     }
 }
@@ -182,7 +210,7 @@ impl Builder {
 pub(super) fn arity(op: Op) -> usize {
     use Op::*;
     match op {
-        Input | Const => 0,
+        Input | Const | Param => 0,
         Neg | Abs | Sqrt | Exp | Log | Sin | Cos | Floor | Finite | Not => 1,
         Add | Sub | Mul | Div | Min | Max | Atan2 | Lt | Le | Gt | Ge | Eq | And | Or => 2,
         Gather => 1,

@@ -2,19 +2,23 @@
 //!
 //! | values | meaning |
 //! |---|---|
-//! | 0..HEADER_LEN | FORMAT, inputs, outputs, instructions, tables, total length, 0, 0 |
+//! | 0..HEADER_LEN | FORMAT, inputs, outputs, instructions, tables, total length, parameters, 0 |
 //! | outputs | the output registers |
 //! | 2 per table | offset (from the array's start) and length |
-//! | 4 per instruction | op code, a, b, c (Const: a is the value itself) |
+//! | 2 per parameter | its id (`ParamId`, STAM_PARAM_*) and the value the program was built with |
+//! | 4 per instruction | op code, a, b, c (Const: a is the value itself; Param: a is the slot) |
 //! | the tables' values | |
 //!
 //! Integers are stored as floats (exact below 2^24; `decode` checks).
+//! Parameter k of the section is slot k: `Param` with a = k reads its value
+//! (the same for every lane), which a renderer may replace (differentiate,
+//! texture) without rebuilding the program.
 
 use super::builder::{arity, operands};
-use super::{Instr, Op, Program};
+use super::{Instr, Op, ParamId, Program};
 
 /// Version of the layout and of the operation set.
-pub const FORMAT: u32 = 2;
+pub const FORMAT: u32 = 3;
 /// Values before the outputs.
 pub const HEADER_LEN: usize = 8;
 
@@ -24,8 +28,9 @@ impl Program {
         let n_out = self.outputs.len();
         let n_tab = self.tables.len();
         let n_code = self.code.len();
+        let n_par = self.params.len();
         let dir = HEADER_LEN + n_out;
-        let code_at = dir + 2 * n_tab;
+        let code_at = dir + 2 * n_tab + 2 * n_par;
         let data_at = code_at + 4 * n_code;
         let total = data_at + self.table_len();
         let mut v = Vec::with_capacity(total);
@@ -36,7 +41,7 @@ impl Program {
             n_code as f32,
             n_tab as f32,
             total as f32,
-            0.0,
+            n_par as f32,
             0.0,
         ]);
         v.extend(self.outputs.iter().map(|&o| o as f32));
@@ -44,6 +49,9 @@ impl Program {
         for t in &self.tables {
             v.extend([offset as f32, t.len() as f32]);
             offset += t.len();
+        }
+        for &(id, value) in &self.params {
+            v.extend([id as u32 as f32, value]);
         }
         for ins in &self.code {
             let a = match ins.op {
@@ -62,7 +70,9 @@ impl Program {
 
 /// The program of an array made by `encode`, checked: every operand a
 /// register defined before its use and of the right kind (float or mask),
-/// every table inside the array. None for anything else.
+/// every table inside the array, every parameter a known id (each at most
+/// once) with a finite value, every `Param` reading one of them. None for
+/// anything else.
 pub fn decode(v: &[f32]) -> Option<Program> {
     let int = |x: f32| -> Option<u32> {
         ((0.0..16_777_216.0).contains(&x) && x.fract() == 0.0).then_some(x as u32)
@@ -75,11 +85,13 @@ pub fn decode(v: &[f32]) -> Option<Program> {
     let n_code = int(v[3])? as usize;
     let n_tab = int(v[4])? as usize;
     let total = int(v[5])? as usize;
-    if total != v.len() {
+    let n_par = int(v[6])? as usize;
+    if total != v.len() || v[7] != 0.0 {
         return None;
     }
     let dir = HEADER_LEN + n_out;
-    let code_at = dir + 2 * n_tab;
+    let par_at = dir + 2 * n_tab;
+    let code_at = par_at + 2 * n_par;
     if code_at + 4 * n_code > total {
         return None;
     }
@@ -91,6 +103,15 @@ pub fn decode(v: &[f32]) -> Option<Program> {
             return None;
         }
         tables.push(v[off..off + len].to_vec());
+    }
+    let mut params: Vec<(ParamId, f32)> = Vec::with_capacity(n_par);
+    for k in 0..n_par {
+        let id = ParamId::from_code(int(v[par_at + 2 * k])?)?;
+        let value = v[par_at + 2 * k + 1];
+        if !value.is_finite() || params.iter().any(|&(p, _)| p == id) {
+            return None;
+        }
+        params.push((id, value));
     }
     let mut code = Vec::with_capacity(n_code);
     let mut is_mask = Vec::with_capacity(n_code);
@@ -111,6 +132,7 @@ pub fn decode(v: &[f32]) -> Option<Program> {
         match op {
             Op::Input if a >= n_inputs => return None,
             Op::Gather if a as usize >= n_tab => return None,
+            Op::Param if a as usize >= n_par => return None,
             _ => {}
         }
         // Operand kinds: masks where the operation takes masks.
@@ -141,5 +163,6 @@ pub fn decode(v: &[f32]) -> Option<Program> {
         code,
         outputs,
         tables,
+        params,
     })
 }

@@ -89,8 +89,24 @@ lane!(f64);
 
 impl Program {
     /// The outputs for one lane of inputs (`inputs.len()` = n_inputs),
-    /// into `out` (n outputs) with `regs` as scratch (grown as needed).
+    /// into `out` (n outputs) with `regs` as scratch (grown as needed),
+    /// with the parameters' stored values.
     pub fn run_into<T: Lane>(&self, inputs: &[T], regs: &mut Vec<T>, out: &mut [T]) {
+        let params: Vec<T> = self.params.iter().map(|&(_, v)| T::from_f32(v)).collect();
+        self.run_with_params_into(inputs, &params, regs, out);
+    }
+
+    /// `run_into` with the parameters' values `params` (by slot,
+    /// `params.len()` = the program's parameters) in place of the stored
+    /// ones.
+    pub fn run_with_params_into<T: Lane>(
+        &self,
+        inputs: &[T],
+        params: &[T],
+        regs: &mut Vec<T>,
+        out: &mut [T],
+    ) {
+        assert_eq!(params.len(), self.params.len(), "parameter values");
         regs.clear();
         regs.reserve(self.code.len());
         let flag = |m: bool| if m { T::one() } else { T::zero() };
@@ -99,6 +115,7 @@ impl Program {
             let v = match ins.op {
                 Op::Input => inputs[ins.a as usize],
                 Op::Const => T::from_f32(f32::from_bits(ins.a)),
+                Op::Param => params[ins.a as usize],
                 Op::Add => r(ins.a).add(r(ins.b)),
                 Op::Sub => r(ins.a).sub(r(ins.b)),
                 Op::Mul => r(ins.a).mul(r(ins.b)),
@@ -154,6 +171,15 @@ impl Program {
         let mut regs = Vec::new();
         let mut out = vec![T::zero(); self.outputs.len()];
         self.run_into(inputs, &mut regs, &mut out);
+        out
+    }
+
+    /// The outputs for one lane of inputs with the parameters' values
+    /// `params` (by slot) in place of the stored ones.
+    pub fn run_with_params<T: Lane>(&self, inputs: &[T], params: &[T]) -> Vec<T> {
+        let mut regs = Vec::new();
+        let mut out = vec![T::zero(); self.outputs.len()];
+        self.run_with_params_into(inputs, params, &mut regs, &mut out);
         out
     }
 }

@@ -17,6 +17,8 @@ mod builder;
 mod encode;
 mod interpret;
 pub mod lookup;
+#[cfg(test)]
+mod tests;
 
 pub use builder::{Builder, Mask, Table, Value};
 pub use encode::{decode, FORMAT, HEADER_LEN};
@@ -66,17 +68,21 @@ pub enum Op {
     /// clamping into [0, len - 1], NaN to 0 (so that a gather can never
     /// leave its table, whatever the program computes).
     Gather = 28,
+    /// The program's parameter in slot a of its parameter list (the same
+    /// value for every lane; `Program::params`, the array's parameter
+    /// section): what a renderer differentiates or textures.
+    Param = 29,
 }
 
 /// The number of operations (codes 0 .. OP_COUNT - 1).
-pub const OP_COUNT: u32 = 29;
+pub const OP_COUNT: u32 = 30;
 
 impl Op {
     pub fn from_code(code: u32) -> Option<Op> {
         use Op::*;
         const ALL: [Op; OP_COUNT as usize] = [
             Input, Const, Add, Sub, Mul, Div, Min, Max, Fma, Neg, Abs, Sqrt, Exp, Log, Sin, Cos,
-            Atan2, Floor, Lt, Le, Gt, Ge, Eq, Finite, And, Or, Not, Select, Gather,
+            Atan2, Floor, Lt, Le, Gt, Ge, Eq, Finite, And, Or, Not, Select, Gather, Param,
         ];
         ALL.get(code as usize).copied()
     }
@@ -88,9 +94,84 @@ impl Op {
     }
 }
 
+/// A material parameter a program can read through `Op::Param` (so that a
+/// renderer can differentiate or texture it): stable numeric ids, the
+/// array's parameter section names parameters by them (mirrored by
+/// `STAM_PARAM_*` in stam.h). New ids are appended, never renumbered.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ParamId {
+    /// RMS height sigma (um).
+    SigmaUm = 0,
+    /// Correlation length of an isotropic surface (um): both axes'.
+    CorrUm = 1,
+    /// Correlation lengths along x and y of an anisotropic surface (um).
+    CorrXUm = 2,
+    CorrYUm = 3,
+    LagUm = 4,
+    PeriodUm = 5,
+    HeightUm = 6,
+    WidthUm = 7,
+    CoherenceUm = 8,
+    Twist = 9,
+    /// The constant Fresnel reflectance.
+    Fresnel = 10,
+    /// The complex index n = eta + i k.
+    Eta = 11,
+    K = 12,
+}
+
+/// The number of parameter ids (codes 0 .. PARAM_COUNT - 1).
+pub const PARAM_COUNT: u32 = 13;
+
+impl ParamId {
+    pub const ALL: [ParamId; PARAM_COUNT as usize] = {
+        use ParamId::*;
+        [
+            SigmaUm,
+            CorrUm,
+            CorrXUm,
+            CorrYUm,
+            LagUm,
+            PeriodUm,
+            HeightUm,
+            WidthUm,
+            CoherenceUm,
+            Twist,
+            Fresnel,
+            Eta,
+            K,
+        ]
+    };
+
+    pub fn from_code(code: u32) -> Option<ParamId> {
+        ParamId::ALL.get(code as usize).copied()
+    }
+
+    /// The material parameter's name (the JSON key).
+    pub fn name(self) -> &'static str {
+        use ParamId::*;
+        match self {
+            SigmaUm => "sigma_um",
+            CorrUm => "corr_um",
+            CorrXUm => "corr_x_um",
+            CorrYUm => "corr_y_um",
+            LagUm => "lag_um",
+            PeriodUm => "period_um",
+            HeightUm => "height_um",
+            WidthUm => "width_um",
+            CoherenceUm => "coherence_um",
+            Twist => "twist",
+            Fresnel => "fresnel",
+            Eta => "eta",
+            K => "k",
+        }
+    }
+}
+
 /// One instruction: the operation and its operands (register indices,
 /// except Input: the input's index; Const: the value's bits; Gather: the
-/// table's index, then the index register).
+/// table's index, then the index register; Param: the parameter's slot).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Instr {
     pub op: Op,
@@ -107,11 +188,19 @@ pub struct Program {
     /// Registers returned, in order (floats).
     pub outputs: Vec<u32>,
     pub tables: Vec<Vec<f32>>,
+    /// The parameters `Op::Param` reads, by slot: their ids and the values
+    /// the program was built with.
+    pub params: Vec<(ParamId, f32)>,
 }
 
 impl Program {
     /// Values held in tables.
     pub fn table_len(&self) -> usize {
         self.tables.iter().map(Vec::len).sum()
+    }
+
+    /// The slot of parameter `id`, if the program reads it.
+    pub fn param_slot(&self, id: ParamId) -> Option<usize> {
+        self.params.iter().position(|&(p, _)| p == id)
     }
 }

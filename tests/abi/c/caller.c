@@ -107,10 +107,10 @@ static int check_coherent_probability(const StamBrdf *b, const float *wi, const 
     return 0;
 }
 
-/* Checks of stam_brdf_export_program (stam.h; layout: format 2): every
+/* Checks of stam_brdf_export_program (stam.h; layout: format 3): every
  * kind sized with out = NULL, nothing written into a buffer that is too
  * small (4 floats, or one short), the whole array written into one of the
- * returned size and nothing past it; the header: format 2, the kind's
+ * returned size and nothing past it; the header: format 3, the kind's
  * numbers of inputs and outputs, the total length, sections that fit in
  * the array, output registers and table offsets inside it. Every kind
  * exists for every material (the JIT variants run nothing else); a kind
@@ -143,17 +143,17 @@ static int check_export_program(const StamBrdf *b, char *report, size_t report_l
                              prog[0] == -1.0f && prog[n - 2] == -1.0f;
         const int sized_ok = stam_brdf_export_program(b, kind, prog, n + 1) == n &&
                              prog[n] == -1.0f;
-        /* Header: format, inputs, outputs, instructions, tables, total
-         * (counts read as integers only once they are known to lie in
-         * [0, n]). */
+        /* Header: format, inputs, outputs, instructions, tables, total,
+         * parameters (counts read as integers only once they are known to
+         * lie in [0, n]). */
         const float *h = prog;
-        int layout_ok = sized_ok && h[0] == 2.0f && h[1] == (float)io[kind][0] &&
+        int layout_ok = sized_ok && h[0] == 3.0f && h[1] == (float)io[kind][0] &&
                         h[2] == (float)io[kind][1] && h[5] == (float)n;
-        for (int j = 2; layout_ok && j < 5; ++j)
+        for (int j = 2; layout_ok && j < 7; ++j)
             layout_ok = h[j] >= 0.0f && h[j] <= (float)n && h[j] == floorf(h[j]);
         const size_t n_out = layout_ok ? (size_t)h[2] : 0, n_code = layout_ok ? (size_t)h[3] : 0,
-                     n_tab = layout_ok ? (size_t)h[4] : 0;
-        const size_t code_at = 8 + n_out + 2 * n_tab;
+                     n_tab = layout_ok ? (size_t)h[4] : 0, n_par = layout_ok ? (size_t)h[6] : 0;
+        const size_t code_at = 8 + n_out + 2 * n_tab + 2 * n_par;
         layout_ok = layout_ok && n_code > 0 && code_at + 4 * n_code <= n;
         for (size_t k = 0; layout_ok && k < n_out; ++k)
             layout_ok = h[8 + k] >= 0.0f && h[8 + k] < (float)n_code;

@@ -229,6 +229,35 @@ mod tests {
         assert_eq!(K::from_code(h::STAM_PROGRAM_KINDS), None);
     }
 
+    /// The parameter ids of the header (STAM_PARAM_*) are the core's
+    /// `ParamId` codes, and STAM_PARAMS is their number.
+    #[test]
+    fn header_param_ids_match_rust() {
+        use c_header as h;
+        use stam::program::ParamId as P;
+        let header = [
+            (h::STAM_PARAM_SIGMA_UM, P::SigmaUm),
+            (h::STAM_PARAM_CORR_UM, P::CorrUm),
+            (h::STAM_PARAM_CORR_X_UM, P::CorrXUm),
+            (h::STAM_PARAM_CORR_Y_UM, P::CorrYUm),
+            (h::STAM_PARAM_LAG_UM, P::LagUm),
+            (h::STAM_PARAM_PERIOD_UM, P::PeriodUm),
+            (h::STAM_PARAM_HEIGHT_UM, P::HeightUm),
+            (h::STAM_PARAM_WIDTH_UM, P::WidthUm),
+            (h::STAM_PARAM_COHERENCE_UM, P::CoherenceUm),
+            (h::STAM_PARAM_TWIST, P::Twist),
+            (h::STAM_PARAM_FRESNEL, P::Fresnel),
+            (h::STAM_PARAM_ETA, P::Eta),
+            (h::STAM_PARAM_K, P::K),
+        ];
+        for (code, id) in header {
+            assert_eq!(code, id as u32, "{id:?}");
+            assert_eq!(P::from_code(code), Some(id));
+        }
+        assert_eq!(h::STAM_PARAMS, stam::program::PARAM_COUNT);
+        assert_eq!(h::STAM_PARAMS as usize, header.len());
+    }
+
     /// The luminance weights the header gives renderers (bindgen turns the
     /// float macros into f64 constants) are the ones the gamut mapping uses.
     #[test]

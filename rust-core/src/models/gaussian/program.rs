@@ -41,7 +41,7 @@ use crate::optics::fresnel::Fresnel;
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::lookup::bspline_weights;
-use crate::program::{Builder, Mask, Table, Value};
+use crate::program::{Builder, Mask, ParamId, Table, Value};
 use crate::sampling::program::{cosine_density_program, cosine_direction_program};
 use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM};
 use std::f64::consts::PI;
@@ -182,11 +182,18 @@ fn expm1<'a>(g: Value<'a>) -> Value<'a> {
 /// The RGB program's per-material table (see the module documentation).
 pub(crate) struct RgbProgramTable {
     /// Values per grid point: 4 (ln N - ln g0 and the three channels over
-    /// N) or one per node (ln(k_j^2 S_j) - ln g0).
+    /// N), 7 folded (and the channels' derivatives along the half-vector
+    /// cosine) or one per node (ln(k_j^2 S_j) - ln g0).
     values: usize,
+    /// The grid holds the rule's sum (else the nodes).
+    combined: bool,
     /// Channels hold the Fresnel-weighted rule (else the plain weights, to
     /// be multiplied by F^2 at the pair's cosine); unused per node.
     folded: bool,
+    /// The correlation length and sigma the folded channels' cosine was
+    /// computed with (cos_h^2 = x0 / T^2 + g0 / (4 sigma^2)).
+    corr_um: f64,
+    sigma_um: f64,
     /// B0 of the folded channels: the program adds `cone_term`(cos_h) B0.
     cos_slope: [f64; 3],
     ln_g0_lo: f64,
@@ -221,7 +228,12 @@ impl RgbProgramTable {
         let k_max = k.iter().cloned().fold(0.0, f64::max);
         let k_ref2 = k_min * k_max;
         let combined = !per_node && (fresnel.is_spectrally_flat() || surface.isotropic);
-        let values = if combined { 4 } else { n };
+        let folded = combined && !fresnel.is_spectrally_flat();
+        let values = match (combined, folded) {
+            (true, true) => 7,
+            (true, false) => 4,
+            _ => n,
+        };
         // |w| <= 2, so g0 <= 4 sigma^2; down to g = RGB_G_LO at the bluest
         // node, and at least 8 rows.
         let ln_g0_hi = (4.0 * sigma * sigma).ln();
@@ -248,7 +260,6 @@ impl RgbProgramTable {
                 (w[0].abs() + w[1].abs() + w[2].abs()).max(1e-12).ln()
             })
             .collect();
-        let folded = combined && !fresnel.is_spectrally_flat();
         // The folded weights are linear in cos near 0, and cos_h = sqrt(x0 /
         // T^2 + g0 / (4 sigma^2)) has a cone's point at the grid's bottom
         // left (both directions grazing, near the mirror), which a spline
@@ -273,6 +284,28 @@ impl RgbProgramTable {
             [0.0; 3]
         };
         let (t2, sigma2) = (surface.corr_x_um * surface.corr_x_um, sigma * sigma);
+        // The folded channels at cosine `cos` for the nodes' shares `rel`,
+        // less `cone_term`(cos) B0. Past 1 (outside the pairs, inside the
+        // splines' reach) the weights continue as w(1 - d) + 2 d w'(1),
+        // which keeps their first two derivatives at 1 (a kink or a jump of
+        // curvature there costs 1e-3 at the rows of w ~ 2), with d
+        // saturating smoothly below 0.5.
+        let fold_at = |cos: f64, rel: &[f64]| -> [f64; 3] {
+            let at = |c: f64| rule.integrate(fresnel, c, rel);
+            let folded: [f64; 3] = if cos <= 1.0 {
+                at(cos)
+            } else {
+                let d = 0.5 * ((cos - 1.0) / 0.5).tanh();
+                let h = 1.0 / 256.0;
+                let (w0, w1, w2) = (at(1.0), at(1.0 - h), at(1.0 - 2.0 * h));
+                let back = at(1.0 - d);
+                let slope: [f64; 3] =
+                    std::array::from_fn(|i| (3.0 * w0[i] - 4.0 * w1[i] + w2[i]) / (2.0 * h));
+                std::array::from_fn(|i| back[i] + 2.0 * d * slope[i])
+            };
+            let cone = cone_term(cos);
+            std::array::from_fn(|i| folded[i] - cone * cos_slope[i])
+        };
         let mut rel = vec![0.0; n];
         for r in 0..ext_rows {
             let ln_g0 = ln_g0_lo + (r as f64 - m as f64) * D_U;
@@ -300,38 +333,27 @@ impl RgbProgramTable {
                 for (o, &l) in rel.iter_mut().zip(point) {
                     *o = (l - ln_n).exp();
                 }
-                let rgb = if folded {
+                if folded {
                     // cos_h^2 = (u^2 + v^2 + w^2) / 4 = x0 / T^2 + g0 / (4
-                    // sigma^2); beyond 1 (outside the pairs, inside the
-                    // splines' reach) the weights continue linearly.
+                    // sigma^2): the channels at this cosine, and their
+                    // derivative along it, with which the program follows
+                    // the cosine where the parameters it reads differ from
+                    // the ones the table was built with.
                     let vv = (c as f64 - m as f64).abs() * D_V;
                     let x0 = rho2_at(vv) * (1.0 / k_ref2 + g0);
                     let cos = (x0 / t2 + g0 / (4.0 * sigma2)).sqrt();
-                    let cone = cone_term(cos);
-                    // Past 1 (outside the pairs, inside the splines'
-                    // reach) the weights continue as w(1 - d) + 2 d w'(1),
-                    // which keeps their first two derivatives at 1 (a kink
-                    // or a jump of curvature there costs 1e-3 at the rows
-                    // of w ~ 2), with d saturating smoothly below 0.5.
-                    let folded: [f64; 3] = if cos <= 1.0 {
-                        rule.integrate(fresnel, cos, &rel)
-                    } else {
-                        let d = 0.5 * ((cos - 1.0) / 0.5).tanh();
-                        let h = 1.0 / 256.0;
-                        let at = |c: f64| rule.integrate(fresnel, c, &rel);
-                        let (w0, w1, w2) = (at(1.0), at(1.0 - h), at(1.0 - 2.0 * h));
-                        let back = at(1.0 - d);
-                        let slope: [f64; 3] = std::array::from_fn(|i| {
-                            (3.0 * w0[i] - 4.0 * w1[i] + w2[i]) / (2.0 * h)
-                        });
-                        std::array::from_fn(|i| back[i] + 2.0 * d * slope[i])
-                    };
-                    std::array::from_fn(|i| folded[i] - cone * cos_slope[i])
+                    let at = |c: f64| fold_at(c, &rel);
+                    let h = 1.0 / 256.0;
+                    let (lo, hi) = ((cos - h).max(0.0), cos + h);
+                    let (a, z) = (at(lo), at(hi));
+                    out[1..4].copy_from_slice(&at(cos));
+                    for i in 0..3 {
+                        out[4 + i] = (z[i] - a[i]) / (hi - lo);
+                    }
                 } else {
-                    plain.integrate(&one, 1.0, &rel)
-                };
+                    out[1..4].copy_from_slice(&plain.integrate(&one, 1.0, &rel));
+                }
                 out[0] = ln_n - ln_g0;
-                out[1..].copy_from_slice(&rgb);
             }
         }
         prefilter_2d(&mut grid, ext_rows, ext_cols, values);
@@ -344,7 +366,10 @@ impl RgbProgramTable {
         }
         Some(RgbProgramTable {
             values,
+            combined,
             folded,
+            corr_um: surface.corr_x_um,
+            sigma_um: sigma,
             cos_slope,
             ln_g0_lo,
             rows,
@@ -760,6 +785,25 @@ impl Gaussian {
     }
 }
 
+impl GaussianSurface {
+    /// sigma, Tx and Ty as the program's parameters (`Op::Param`: a
+    /// renderer may change them): sigma_um, and corr_um for both axes of
+    /// an isotropic surface, else corr_x_um and corr_y_um.
+    fn params_program<'a>(&self, b: &'a Builder) -> (Value<'a>, Value<'a>, Value<'a>) {
+        let sigma = b.param(ParamId::SigmaUm, self.sigma_um);
+        if self.isotropic {
+            let t = b.param(ParamId::CorrUm, self.corr_x_um);
+            (sigma, t, t)
+        } else {
+            (
+                sigma,
+                b.param(ParamId::CorrXUm, self.corr_x_um),
+                b.param(ParamId::CorrYUm, self.corr_y_um),
+            )
+        }
+    }
+}
+
 /// A uniform number usable as such: finite, in [0, 1).
 fn uniform(u: Value) -> Value {
     u.finite().select(u, 0.0).clamp(0.0, 1.0 - 1e-7)
@@ -772,19 +816,15 @@ impl SurfacePrograms for Gaussian {
         pair: &PairProgram<'a>,
         k_per_um: Value<'a>,
     ) -> Option<Value<'a>> {
-        let s = &self.surface;
         let lk = SeriesLookup::new(b);
-        let a = (k_per_um * s.sigma_um * pair.w).abs();
+        let (sigma, tx, ty) = self.surface.params_program(b);
+        let a = (k_per_um * sigma * pair.w).abs();
         let g = a * a;
         let ln_g = a.ln() * 2.0;
-        let (qx, qy) = (
-            0.25 * s.corr_x_um * s.corr_x_um,
-            0.25 * s.corr_y_um * s.corr_y_um,
-        );
+        let (qx, qy) = (tx * tx * 0.25, ty * ty * 0.25);
         let x = k_per_um * k_per_um * (pair.u * pair.u * qx + pair.v * pair.v * qy);
         let series = series(b, &lk, g, ln_g, x);
-        let prefactor =
-            k_per_um * k_per_um * (s.corr_x_um * s.corr_y_um / (4.0 * PI)) / (pair.w * pair.w);
+        let prefactor = k_per_um * k_per_um * (tx * ty * (1.0 / (4.0 * PI))) / (pair.w * pair.w);
         Some(prefactor * series)
     }
 
@@ -812,7 +852,8 @@ impl SurfacePrograms for Gaussian {
         lambda_nm: Value<'a>,
     ) -> Option<Value<'a>> {
         let k = (2000.0 * PI) / lambda_nm;
-        let a = k * (2.0 * self.surface.sigma_um) * cos_i;
+        let sigma = b.param(ParamId::SigmaUm, self.surface.sigma_um);
+        let a = k * (sigma * 2.0) * cos_i;
         let g = a * a;
         let r = shading.fresnel.program(b, cos_i, lambda_nm) * (-g).exp();
         Some(g.gt(COHERENT_MAX_G).select(0.0, r))
@@ -829,7 +870,8 @@ impl SurfacePrograms for Gaussian {
             return None;
         }
         let rule = shading.rgb_rule;
-        let c2 = cos_i * cos_i * (4.0 * self.surface.sigma_um * self.surface.sigma_um);
+        let sigma = b.param(ParamId::SigmaUm, self.surface.sigma_um);
+        let c2 = cos_i * cos_i * (sigma * sigma * 4.0);
         let values: Vec<Value> = rule
             .k_per_um
             .iter()
@@ -957,11 +999,11 @@ fn rgb_from_table<'a>(
     pair: &PairProgram<'a>,
 ) -> [Value<'a>; 3] {
     let table = b.table(t.coef.clone());
-    let sw = (pair.w * s.sigma_um).abs();
+    let (sigma, tx, ty) = s.params_program(b);
+    let sw = (pair.w * sigma).abs();
     let g0 = sw * sw;
     let ln_g0 = sw.ln() * 2.0;
-    let x0 = pair.u * pair.u * (0.25 * s.corr_x_um * s.corr_x_um)
-        + pair.v * pair.v * (0.25 * s.corr_y_um * s.corr_y_um);
+    let x0 = pair.u * pair.u * (tx * tx * 0.25) + pair.v * pair.v * (ty * ty * 0.25);
     // Rows: below the lowest the values repeat it (ln(S / g0) constant).
     let fu = ((ln_g0 - t.ln_g0_lo) * (1.0 / D_U)).clamp(0.0, (t.rows - 1) as f64);
     let iu = fu.floor().min((t.rows - 2) as f64);
@@ -975,13 +1017,20 @@ fn rgb_from_table<'a>(
     let wv = bspline_weights(fv - iv);
     let v = bicubic(b, table, base, t.row_len, t.values, t.values, wu, wv);
     // K_j = Tx Ty / (4 pi w^2) k_j^2 S_j = sigma^2 Tx Ty / (4 pi g0) k_j^2 S_j.
-    let ln_scale = (s.sigma_um * s.sigma_um * s.corr_x_um * s.corr_y_um / (4.0 * PI)).ln();
-    let rgb = if t.values == 4 {
+    let ln_scale = (sigma * sigma * tx * ty * (1.0 / (4.0 * PI))).ln();
+    let rgb = if t.combined {
         let n = (v[0] + ln_scale).exp();
         if t.folded {
             let c = pair.cos_half;
             let cone = c * (c * c * -4.0).exp();
-            std::array::from_fn(|i| cone.fma(t.cos_slope[i], v[1 + i]) * n)
+            // The cosine the table's point had at the parameters it was
+            // built with; where the program's parameters differ, the
+            // channels follow the pair's cosine to first order.
+            let cos_table = (x0 * (1.0 / (t.corr_um * t.corr_um))
+                + g0 * (1.0 / (4.0 * t.sigma_um * t.sigma_um)))
+                .sqrt();
+            let dc = c - cos_table;
+            std::array::from_fn(|i| dc.fma(v[4 + i], cone.fma(t.cos_slope[i], v[1 + i])) * n)
         } else {
             let scale = n * shading.fresnel.program(b, pair.cos_half, b.c(550.0));
             [v[1] * scale, v[2] * scale, v[3] * scale]
@@ -1138,3 +1187,7 @@ fn low_rank(
 #[cfg(test)]
 #[path = "program_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "param_tests.rs"]
+mod param_tests;
