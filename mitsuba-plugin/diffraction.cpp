@@ -36,6 +36,8 @@
 #include "batch.h"
 #include "jit_path.h"
 #include "params_json.h"
+#include "plugin_params.h"
+#include "shape_kind.h"
 
 NAMESPACE_BEGIN(mitsuba)
 
@@ -255,8 +257,18 @@ using diffraction_detail::BatchIO;
 using diffraction_detail::CorePtr;
 using diffraction_detail::excerpt;
 using diffraction_detail::json_escape;
+using diffraction_detail::build_json;
 using diffraction_detail::json_number;
+using diffraction_detail::number_text;
+using diffraction_detail::set_text;
 using diffraction_detail::JitPath;
+using diffraction_detail::param_id;
+using diffraction_detail::scalar_of;
+using diffraction_detail::ShapeKind;
+using diffraction_detail::shape_kind;
+using diffraction_detail::UvShape;
+using diffraction_detail::PolarDisk;
+using diffraction_detail::MeshWithoutUv;
 using diffraction_detail::ParamError;
 using diffraction_detail::parse_profile_heights;
 using diffraction_detail::run_batch;
@@ -272,6 +284,7 @@ public:
     enum class Tracks { Linear, Concentric };
 
     using IO = BatchIO<Float, Spectrum>;
+    using Param = diffraction_detail::PluginParam<Float>; // a parameter forwarded to the core
     using Jit = JitPath<Float, Spectrum>;
     using FloatStorage = typename Jit::FloatStorage;
 
@@ -302,6 +315,7 @@ public:
 
                 if (name == "twist") {
                     m_twist = (ScalarFloat) it->template get<double>();
+                    m_twist_diff = Float(m_twist);
                 } else if (name == "tracks") {
                     set_tracks(it->template get<std::string>());
                 } else if (name == "center_u") {
@@ -317,6 +331,8 @@ public:
                     p.kind = Param::Number;
                     p.given = v;
                     p.value = (ScalarFloat) v;
+                    p.diff = Float(p.value);
+                    p.id = param_id(name);
                     // eta, k: nested under "fresnel"
                     if (name == "eta" || name == "k")
                         p.group = "fresnel";
@@ -379,12 +395,20 @@ public:
     void traverse(TraversalCallback *cb) override {
         Base::traverse(cb);
         for (Param &p : m_params) {
-            if (p.kind == Param::Number)
+            if (p.kind == Param::Number && dr::is_jit_v<Float>)
+                cb->put(p.name, p.diff, reads(p.id) ? ParamFlags::Differentiable
+                                                    : ParamFlags::NonDifferentiable);
+            else if (p.kind == Param::Number)
                 cb->put(p.name, p.value, ParamFlags::NonDifferentiable);
             else if (p.kind == Param::String || p.kind == Param::Json)
                 cb->put(p.name, p.holder, ParamFlags::NonDifferentiable);
         }
-        cb->put("twist", m_twist, ParamFlags::NonDifferentiable);
+        if constexpr (dr::is_jit_v<Float>)
+            cb->put("twist", m_twist_diff,
+                    (m_components[0] & +BSDFFlags::Anisotropic) ? ParamFlags::Differentiable
+                                                                : ParamFlags::NonDifferentiable);
+        else
+            cb->put("twist", m_twist, ParamFlags::NonDifferentiable);
         cb->put("tracks", m_tracks_holder, ParamFlags::NonDifferentiable);
         if (m_tracks == Tracks::Concentric) {
             cb->put("center_u", m_center_u, ParamFlags::NonDifferentiable);
@@ -405,6 +429,12 @@ public:
                     set_text(p, std::string(p.holder.plugin_name()));
             if (std::string(m_tracks_holder.plugin_name()) != tracks_name(m_tracks))
                 set_tracks(std::string(m_tracks_holder.plugin_name()));
+            if constexpr (dr::is_jit_v<Float>) {
+                for (Param &p : m_params)
+                    if (p.kind == Param::Number)
+                        p.value = scalar_of(p.diff, p.name);
+                m_twist = scalar_of(m_twist_diff, "twist");
+            }
             check_frame();
             Core core = build_core();
             if (((core.flags & STAM_FLAG_HAS_COHERENT) != 0) != m_has_coherent)
@@ -509,21 +539,6 @@ public:
     MI_DECLARE_CLASS(Diffraction)
 
 private:
-    /// A parameter forwarded to the core
-    struct Param {
-        enum Kind { Number, String, Bool, Json } kind = Number;
-        std::string name;
-        std::string group;  // non-empty: nested in an object of that name
-        double given = 0.0; // number as given by the user
-        ScalarFloat value = 0.f; // number as exposed by traverse()
-        std::string text;   // string value, or raw JSON
-        std::string source; // String, Json: the user's string
-        /// String, Json: the user's string as the plugin name of a
-        /// Properties, the registered type that carries it through
-        /// mi.traverse (which has no strings)
-        Properties holder;
-    };
-
     /// What parameters_changed restores when it refuses an update
     struct State {
         std::vector<Param> params;
@@ -548,13 +563,6 @@ private:
         UnpolarizedSpectrum weight; // sample weight
     };
 
-    /// How a shape defines the tracks (see frame_rotation)
-    enum ShapeKind : uint32_t {
-        UvShape = 0,     // uv parametrisation (rectangle, meshes with uv, ...; or no shape)
-        PolarDisk = 1,   // Mitsuba's disk: u = radius, v = angle / 2 pi
-        MeshWithoutUv = 2
-    };
-
     static const char *tracks_name(Tracks t) {
         return t == Tracks::Linear ? "linear" : "concentric";
     }
@@ -570,22 +578,41 @@ private:
         m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
     }
 
-    /// A string parameter's kind and core text from the user's string
-    static void set_text(Param &p, const std::string &s) {
-        std::vector<double> heights;
-        if (p.name == "profile" && s != "rect" && s != "sine" &&
-            parse_profile_heights(s, heights)) {
-            p.kind = Param::Json;
-            std::string j = "{\"heights_um\": [";
-            for (size_t i = 0; i < heights.size(); ++i)
-                j += (i ? ", " : "") + json_number(heights[i]);
-            p.text = j + "]}";
+    /// Whether the material's programs read the parameter `id` (JIT
+    /// variants: its value, and gradients, flow into them)
+    bool reads(int id) const {
+        if constexpr (dr::is_jit_v<Float>) {
+            std::vector<uint32_t> ids = m_jit.param_ids();
+            return id >= 0 && std::find(ids.begin(), ids.end(), (uint32_t) id) != ids.end();
         } else {
-            p.kind = Param::String;
-            p.text = s;
+            DRJIT_MARK_USED(id);
+            return false;
         }
-        p.source = s;
-        p.holder.set_plugin_name(s);
+    }
+
+    /// JIT variants: the parameters whose values carry gradients, by id,
+    /// for the programs (an empty list: the programs' own values, which a
+    /// frozen or symbolic kernel bakes in)
+    typename Jit::Params jit_params() const {
+        typename Jit::Params out;
+        if constexpr (dr::is_diff_v<Float>)
+            for (const Param &p : m_params)
+                if (p.kind == Param::Number && p.id >= 0 && dr::grad_enabled(p.diff)) {
+                    out.resize(STAM_PARAMS);
+                    out[p.id] = p.diff;
+                }
+        return out;
+    }
+
+    /// The twist's rotation (cos, sin): differentiable in JIT variants where
+    /// the twist carries a gradient
+    std::pair<Float, Float> twist_rotation() const {
+        if constexpr (dr::is_diff_v<Float>)
+            if (dr::grad_enabled(m_twist_diff)) {
+                auto [s, c] = dr::sincos(m_twist_diff * (dr::Pi<ScalarFloat> / 180.f));
+                return { c, s };
+            }
+        return { Float(m_cos_twist), Float(m_sin_twist) };
     }
 
     /// The plugin's frame parameters: finite, twist within a turn
@@ -607,48 +634,18 @@ private:
         for (size_t i = 0; i < m_params.size() && i < s.params.size(); ++i)
             m_params[i] = s.params[i];
         m_twist = s.twist;
+        m_twist_diff = Float(m_twist);
         m_center_u = s.center_u;
         m_center_v = s.center_v;
         m_tracks = s.tracks;
         m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
     }
 
-    std::string number_text(const Param &p) const {
-        // The user's value unless traverse() changed it
-        if ((ScalarFloat) p.given == p.value)
-            return json_number(p.given);
-        char buf[32];
-        std::snprintf(buf, sizeof(buf), "%.9g", (double) p.value);
-        return buf;
-    }
-
-    std::string build_json() const {
-        std::string top, nested;
-        for (const Param &p : m_params) {
-            std::string v;
-            switch (p.kind) {
-                case Param::Number:
-                    if (!std::isfinite(p.value))
-                        throw ParamError("parameter '" + p.name + "' must be finite");
-                    v = number_text(p);
-                    break;
-                case Param::String: v = json_escape(p.text); break;
-                case Param::Bool:
-                case Param::Json: v = p.text; break;
-            }
-            std::string &dst = p.group.empty() ? top : nested;
-            dst += (dst.empty() ? "" : ", ") + json_escape(p.name) + ": " + v;
-        }
-        if (!nested.empty())
-            top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
-        return "{" + top + "}";
-    }
-
     /// A core material from the current parameters; throws ParamError with
     /// the core's message (completed with the plugin's keys) when refused.
     Core build_core() const {
         Core c;
-        c.json = build_json();
+        c.json = build_json(m_params);
         char err[4096] = { 0 };
         c.ptr.reset(stam_brdf_new(c.json.c_str(), err, sizeof(err)));
         if (!c.ptr)
@@ -689,43 +686,6 @@ private:
             Log(Warn, "diffraction: %s", m_warnings.substr(pos, nl - pos));
             pos = nl + 1;
         }
-    }
-
-    /// Reads the width of a mesh's texture coordinate buffer from its
-    /// traverse() (mesh.h, whose accessors would tell, needs headers the
-    /// wheel lacks).
-    struct TexcoordProbe : TraversalCallback {
-        // Mesh<Float, Spectrum>::FloatStorage (InputFloat is float)
-        using FloatStorage = DynamicBuffer<dr::replace_scalar_t<Float, float>>;
-        size_t width = 0;
-        bool seen = false;
-        void put_value(std::string_view name, void *value, uint32_t,
-                       const std::type_info &type) override {
-            if (name == "vertex_texcoords" && type == typeid(FloatStorage)) {
-                width = dr::width(*(const FloatStorage *) value);
-                seen = true;
-            }
-        }
-        void put_object(std::string_view, Object *, uint32_t) override { }
-    };
-
-    /// How one shape defines the tracks. A mesh is probed at every call
-    /// (scalar variants: per query, a few ns; JIT variants: once per batch
-    /// and mesh): a cache keyed by the shape's address would go stale when
-    /// a freed mesh's address is reused.
-    static uint32_t shape_kind(const Shape *shape) {
-        if (!shape)
-            return UvShape;
-        uint32_t type = shape->shape_type();
-        if (type == +ShapeType::Disk)
-            return PolarDisk;
-        if (type == +ShapeType::Mesh) {
-            TexcoordProbe probe;
-            const_cast<Shape *>(shape)->traverse(&probe);
-            if (probe.seen && probe.width == 0)
-                return MeshWithoutUv;
-        }
-        return UvShape;
     }
 
     /// How the shape of each lane defines the tracks. Throws for a mesh
@@ -799,8 +759,9 @@ private:
         UInt32 kind = shape_kinds(si, active);
         Mask disk = kind == (uint32_t) PolarDisk;
         const bool linear = m_tracks == Tracks::Linear;
+        auto [cos_t, sin_t] = twist_rotation();
         if (linear && dr::none_or<false>(disk && active))
-            return { Float(m_cos_twist), Float(m_sin_twist) };
+            return { cos_t, sin_t };
 
         // A disk's uv is polar: u = r, v = phi / 2 pi, dp_du = M e_r and
         // dp_dv = 2 pi r M e_phi (M: its to_world); its object point is
@@ -831,8 +792,7 @@ private:
         // Degenerate (the centre, no uv derivatives): the shading tangent
         Float c0 = dr::select(ok, dir.x() * inv, 1.f),
               s0 = dr::select(ok, dir.y() * inv, 0.f);
-        return { c0 * m_cos_twist - s0 * m_sin_twist,
-                 s0 * m_cos_twist + c0 * m_sin_twist };
+        return { c0 * cos_t - s0 * sin_t, s0 * cos_t + c0 * sin_t };
     }
 
     static Vector3f to_core(const Vector3f &w, const Float &c, const Float &s) {
@@ -947,24 +907,25 @@ private:
                    const Float *sample1, const Point2f *sample2, bool want_value,
                    bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
+        const typename Jit::Params params = jit_params();
         if (st.do_eval) {
             if (want_value)
                 q.value = dr::select(st.active_e,
-                                     m_jit.f(st.wi_c, st.wo_c, wl, m_tables) *
+                                     m_jit.f(st.wi_c, st.wo_c, wl, m_tables, params) *
                                          Frame3f::cos_theta(*wo),
                                      0.f);
             if (want_pdf)
-                q.pdf = dr::select(st.active_e, m_jit.pdf(st.wi_c, st.wo_c, wl, m_tables), 0.f);
+                q.pdf = dr::select(st.active_e, m_jit.pdf(st.wi_c, st.wo_c, wl, m_tables, params), 0.f);
         }
         if (st.do_sample) {
-            auto [swo_c, coh] = m_jit.sample(st.wi_c, *sample1, *sample2, wl, m_tables);
+            auto [swo_c, coh] = m_jit.sample(st.wi_c, *sample1, *sample2, wl, m_tables, params);
             // Glossy: f cos and the pdf, both at the sampled direction
             Float cos_o = Frame3f::cos_theta(from_core(swo_c, st.c, st.s));
-            UnpolarizedSpectrum value = m_jit.f(st.wi_c, swo_c, wl, m_tables) * cos_o;
-            Float spdf = m_jit.pdf(st.wi_c, swo_c, wl, m_tables);
+            UnpolarizedSpectrum value = m_jit.f(st.wi_c, swo_c, wl, m_tables, params) * cos_o;
+            Float spdf = m_jit.pdf(st.wi_c, swo_c, wl, m_tables, params);
             if (m_has_coherent) {
                 // Coherent: the lobe's reflectance and its probability
-                auto [r, p_c] = m_jit.coherent(st.wi_c, wl, m_tables);
+                auto [r, p_c] = m_jit.coherent(st.wi_c, wl, m_tables, params);
                 spdf = dr::select(coh, p_c, spdf);
                 value = dr::select(coh, r, value);
             }
@@ -990,6 +951,7 @@ private:
 
     std::vector<Param> m_params;
     ScalarFloat m_twist = 0.f;
+    Float m_twist_diff = 0.f;               // JIT variants: `twist` through mi.traverse
     Tracks m_tracks = Tracks::Linear;
     Properties m_tracks_holder{ "linear" }; // `tracks` through mi.traverse
     ScalarFloat m_center_u = 0.5f, m_center_v = 0.5f;

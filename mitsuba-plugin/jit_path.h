@@ -15,6 +15,7 @@
 #include <mitsuba/core/spectrum.h>
 #include <mitsuba/render/interaction.h>
 
+#include <algorithm>
 #include <ostream>
 #include <string>
 #include <vector>
@@ -31,6 +32,9 @@ public:
     MI_IMPORT_TYPES()
     using Prog = program::Program<Float>;
     using FloatStorage = DynamicBuffer<Float>;
+    /// Values of the material's parameters by STAM_PARAM_* id (an entry of
+    /// width 0: the programs' own value), program.h's Program::run
+    using Params = std::vector<Float>;
 
     static constexpr bool IsSpectral = is_spectral_v<Spectrum>;
     static constexpr bool IsMono = is_monochromatic_v<Spectrum>;
@@ -99,6 +103,17 @@ public:
                          : dr::load<FloatStorage>(t.data(), t.size());
     }
 
+    /// The ids (STAM_PARAM_*) of the parameters the programs read: the
+    /// material's parameters whose values flow into them (differentiable)
+    std::vector<uint32_t> param_ids() const {
+        std::vector<uint32_t> ids;
+        for (const Prog *p : { &m_eval, &m_pdf, &m_sample, &m_coherent })
+            for (uint32_t id : p->param_ids())
+                if (std::find(ids.begin(), ids.end(), id) == ids.end())
+                    ids.push_back(id);
+        return ids;
+    }
+
     /// "eval N ops M gathers, ..., tables K values" (the object's string form)
     void describe(std::ostream &os, size_t table_values) const {
         const char *names[] = { "eval", "pdf", "sample", "coherent" };
@@ -112,30 +127,30 @@ public:
     /// f(wi, wo) without cos (core frame), at each of the path's
     /// wavelengths (spectral) or in RGB
     UnpolarizedSpectrum f(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
-                          const FloatStorage &tables) const {
+                          const FloatStorage &tables, const Params &params) const {
         if constexpr (IsSpectral) {
             UnpolarizedSpectrum f;
             for (size_t j = 0; j < NW; ++j)
-                f[j] = m_eval.run(inputs(wi, &wo, { wl[j] }), tables)[0];
+                f[j] = m_eval.run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
             return f;
         } else {
             DRJIT_MARK_USED(wl);
-            return from_rgb(m_eval.run(inputs(wi, &wo, {}), tables));
+            return from_rgb(m_eval.run(inputs(wi, &wo, {}), tables, params));
         }
     }
 
     /// The glossy density at wo; spectral: the mean of the wavelengths'
     /// densities, the density of `sample`'s mixture
     Float pdf(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
-              const FloatStorage &tables) const {
+              const FloatStorage &tables, const Params &params) const {
         if constexpr (IsSpectral) {
             Float p = 0.f;
             for (size_t j = 0; j < NW; ++j)
-                p += m_pdf.run(inputs(wi, &wo, { wl[j] }), tables)[0];
+                p += m_pdf.run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
             return p * (1.f / NW);
         } else {
             DRJIT_MARK_USED(wl);
-            return m_pdf.run(inputs(wi, &wo, {}), tables)[0];
+            return m_pdf.run(inputs(wi, &wo, {}), tables, params)[0];
         }
     }
 
@@ -144,7 +159,7 @@ public:
     /// wavelengths uniformly and is remapped to [0, 1) for the program.
     std::pair<Vector3f, Mask> sample(const Vector3f &wi, const Float &sample1,
                                      const Point2f &sample2, const Wavelength &wl,
-                                     const FloatStorage &tables) const {
+                                     const FloatStorage &tables, const Params &params) const {
         std::vector<Float> o;
         if constexpr (IsSpectral) {
             Float x = sample1 * (float) NW;
@@ -157,7 +172,7 @@ public:
                              tables);
         } else {
             DRJIT_MARK_USED(wl);
-            o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables);
+            o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables, params);
         }
         return { Vector3f(o[0], o[1], o[2]), o[3] > .5f };
     }
@@ -166,19 +181,20 @@ public:
     /// `sample` picks it (spectral: the mean over the path's wavelengths,
     /// the mixture's probability of the common mirror direction)
     std::pair<UnpolarizedSpectrum, Float> coherent(const Vector3f &wi, const Wavelength &wl,
-                                                   const FloatStorage &tables) const {
+                                                   const FloatStorage &tables,
+                                                   const Params &params) const {
         if constexpr (IsSpectral) {
             UnpolarizedSpectrum r;
             Float p = 0.f;
             for (size_t j = 0; j < NW; ++j) {
-                std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, { wl[j] }), tables);
+                std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, { wl[j] }), tables, params);
                 r[j] = o[0];
                 p += o[1];
             }
             return { r, p * (1.f / NW) };
         } else {
             DRJIT_MARK_USED(wl);
-            std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, {}), tables);
+            std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, {}), tables, params);
             return { from_rgb(o), o[3] };
         }
     }

@@ -34,7 +34,7 @@ namespace dr = ::drjit;
 
 /// Version of the array layout and of the operation set (the core's
 /// program::FORMAT).
-constexpr uint32_t Format = 2;
+constexpr uint32_t Format = 3;
 /// Values before the outputs (program::HEADER_LEN).
 constexpr size_t HeaderLen = 8;
 
@@ -43,14 +43,14 @@ enum class Op : uint32_t {
     Input = 0, Const = 1, Add = 2, Sub = 3, Mul = 4, Div = 5, Min = 6, Max = 7,
     Fma = 8, Neg = 9, Abs = 10, Sqrt = 11, Exp = 12, Log = 13, Sin = 14, Cos = 15,
     Atan2 = 16, Floor = 17, Lt = 18, Le = 19, Gt = 20, Ge = 21, Eq = 22, Finite = 23,
-    And = 24, Or = 25, Not = 26, Select = 27, Gather = 28
+    And = 24, Or = 25, Not = 26, Select = 27, Gather = 28, Param = 29
 };
-constexpr uint32_t OpCount = 29;
+constexpr uint32_t OpCount = 30;
 
 /// The registers an operation reads (Gather reads only its index, b).
 inline size_t arity(Op op) {
     switch (op) {
-        case Op::Input: case Op::Const: return 0;
+        case Op::Input: case Op::Const: case Op::Param: return 0;
         case Op::Neg: case Op::Abs: case Op::Sqrt: case Op::Exp: case Op::Log:
         case Op::Sin: case Op::Cos: case Op::Floor: case Op::Finite: case Op::Not:
         case Op::Gather:
@@ -81,7 +81,8 @@ inline bool wants_mask(Op op, size_t k) {
 
 struct Instr {
     Op op;
-    uint32_t a, b, c; // registers; Input: the input; Const: a's bits; Gather: table, index
+    uint32_t a, b, c; // registers; Input: the input; Const: a's bits; Gather: table,
+                      // index; Param: the slot in the parameter section
     float value;      // Const
     /// The registers it reads: a, b, c by arity; Gather: b.
     uint32_t operand(size_t k) const {
@@ -98,6 +99,10 @@ struct Code {
     std::vector<Instr> code;
     std::vector<uint32_t> outputs;
     std::vector<size_t> table_offset, table_len; // into the array
+    /// The parameter section: slot k's id (STAM_PARAM_*) and the value the
+    /// program was built with (Param reads slot k)
+    std::vector<uint32_t> param_id;
+    std::vector<float> param_value;
     /// After instruction i, the registers whose last reader it was (so that
     /// the executor drops them: Dr.Jit then holds only the live ones).
     std::vector<std::vector<uint32_t>> last_use;
@@ -133,11 +138,13 @@ inline Code decode_program(const float *v, size_t len) {
     Code p;
     p.n_inputs = int_at(1, "the input count");
     size_t n_out = int_at(2, "the output count"), n_code = int_at(3, "the instruction count"),
-           n_tab = int_at(4, "the table count"), total = int_at(5, "the length");
+           n_tab = int_at(4, "the table count"), total = int_at(5, "the length"),
+           n_par = int_at(6, "the parameter count");
     if (total != len)
         fail("its header says " + std::to_string(total) + " values, the array has " +
              std::to_string(len));
-    size_t dir = HeaderLen + n_out, code_at = dir + 2 * n_tab, data_at = code_at + 4 * n_code;
+    size_t dir = HeaderLen + n_out, par_at = dir + 2 * n_tab, code_at = par_at + 2 * n_par,
+           data_at = code_at + 4 * n_code;
     if (data_at > total)
         fail("its code runs past its end");
     for (size_t t = 0; t < n_tab; ++t) {
@@ -147,6 +154,13 @@ inline Code decode_program(const float *v, size_t len) {
             fail("table " + std::to_string(t) + " lies outside the table data");
         p.table_offset.push_back(off);
         p.table_len.push_back(n);
+    }
+    for (size_t k = 0; k < n_par; ++k) {
+        uint32_t id = int_at(par_at + 2 * k, "a parameter id");
+        if (id >= STAM_PARAMS)
+            fail("parameter " + std::to_string(k) + " has the unknown id " + std::to_string(id));
+        p.param_id.push_back(id);
+        p.param_value.push_back(v[par_at + 2 * k + 1]);
     }
     std::vector<bool> is_mask;
     std::vector<size_t> last(n_code, 0);
@@ -171,6 +185,9 @@ inline Code decode_program(const float *v, size_t len) {
         if (ins.op == Op::Input && ins.a >= p.n_inputs)
             fail("instruction " + std::to_string(i) + " reads input " +
                  std::to_string(ins.a) + " of " + std::to_string(p.n_inputs));
+        if (ins.op == Op::Param && ins.a >= n_par)
+            fail("instruction " + std::to_string(i) + " reads parameter slot " +
+                 std::to_string(ins.a) + " of " + std::to_string(n_par));
         if (ins.op == Op::Gather && ins.a >= n_tab)
             fail("instruction " + std::to_string(i) + " reads table " +
                  std::to_string(ins.a) + " of " + std::to_string(n_tab));
@@ -269,12 +286,18 @@ public:
     size_t n_outputs() const { return m_code.outputs.size(); }
     size_t n_instructions() const { return m_code.code.size(); }
     size_t n_gathers() const { return m_code.gathers; }
+    /// The ids (STAM_PARAM_*) of the parameters the program reads.
+    const std::vector<uint32_t> &param_ids() const { return m_code.param_id; }
 
     /// The outputs for `inputs` (n_inputs arrays), one Dr.Jit operation per
     /// instruction; `tables` is the buffer the constructor's storage was
-    /// loaded into.
+    /// loaded into. `params` (indexed by STAM_PARAM_* id; may be shorter)
+    /// gives the values of the parameters the program reads where an entry
+    /// is initialised (width > 0: a differentiated or textured value), else
+    /// the program's own.
     template <typename Storage>
-    std::vector<Float> run(const std::vector<Float> &inputs, const Storage &tables) const {
+    std::vector<Float> run(const std::vector<Float> &inputs, const Storage &tables,
+                           const std::vector<Float> &params = {}) const {
         if (inputs.size() != m_code.n_inputs)
             throw std::runtime_error("program: " + std::to_string(inputs.size()) +
                                      " inputs given, it takes " +
@@ -315,6 +338,13 @@ public:
                 case Op::Not: m[i] = !m[in.a]; break;
                 case Op::Select: f[i] = dr::select(m[in.a], fb, fc); break;
                 case Op::Gather: f[i] = gather(in.a, fb, tables); break;
+                case Op::Param: {
+                    uint32_t id = m_code.param_id[in.a];
+                    f[i] = id < params.size() && dr::width(params[id]) > 0
+                               ? params[id]
+                               : Float(m_code.param_value[in.a]);
+                    break;
+                }
             }
             for (uint32_t r : m_code.last_use[i]) {
                 f[r] = Float();

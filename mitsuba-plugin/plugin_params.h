@@ -1,0 +1,119 @@
+/* plugin_params.h: the diffraction plugin's parameters as the user gave
+ * them (diffraction.cpp): each one's kind, its value as mi.traverse exposes
+ * it, and the core's JSON built from them (params_json.h has the JSON
+ * helpers). No physics.
+ */
+#pragma once
+
+#include <mitsuba/core/properties.h>
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "../rust-core/include/stam.h"
+#include "params_json.h"
+
+NAMESPACE_BEGIN(mitsuba)
+NAMESPACE_BEGIN(diffraction_detail)
+
+/// A parameter forwarded to the core
+template <typename Float> struct PluginParam {
+    using ScalarFloat = dr::scalar_t<Float>;
+    enum Kind { Number, String, Bool, Json } kind = Number;
+    std::string name;
+    std::string group;       // non-empty: nested in an object of that name
+    double given = 0.0;      // number as given by the user
+    ScalarFloat value = 0.f; // number as exposed by traverse() (scalar variants)
+    /// JIT variants: the number as traverse() exposes it, differentiable
+    /// where the material's programs read it (STAM_PARAM_* `id`)
+    Float diff = 0.f;
+    int id = -1;
+    std::string text;   // string value, or raw JSON
+    std::string source; // String, Json: the user's string
+    /// String, Json: the user's string as the plugin name of a Properties,
+    /// the registered type that carries it through mi.traverse (which has
+    /// no strings)
+    Properties holder;
+};
+
+/// The STAM_PARAM_* id of a numeric parameter's name, -1 for none
+inline int param_id(const std::string &name) {
+    static const char *names[STAM_PARAMS] = { "sigma_um",  "corr_um",   "corr_x_um",
+                                              "corr_y_um", "lag_um",    "period_um",
+                                              "height_um", "width_um",  "coherence_um",
+                                              "twist",     "fresnel",   "eta",
+                                              "k" };
+    for (uint32_t id = 0; id < STAM_PARAMS; ++id)
+        if (name == names[id])
+            return (int) id;
+    return -1;
+}
+
+/// The number a JIT variant's parameter holds (one value)
+template <typename Float>
+dr::scalar_t<Float> scalar_of(const Float &v, const std::string &name) {
+    if constexpr (dr::is_jit_v<Float>) {
+        if (dr::width(v) != 1)
+            throw ParamError("parameter '" + name + "' must be a single value (" +
+                             std::to_string(dr::width(v)) + " given)");
+        return dr::slice(dr::detach(v), 0);
+    } else {
+        DRJIT_MARK_USED(name);
+        return v;
+    }
+}
+
+/// A string parameter's kind and core text from the user's string
+template <typename Float> void set_text(PluginParam<Float> &p, const std::string &s) {
+    std::vector<double> heights;
+    if (p.name == "profile" && s != "rect" && s != "sine" && parse_profile_heights(s, heights)) {
+        p.kind = PluginParam<Float>::Json;
+        std::string j = "{\"heights_um\": [";
+        for (size_t i = 0; i < heights.size(); ++i)
+            j += (i ? ", " : "") + json_number(heights[i]);
+        p.text = j + "]}";
+    } else {
+        p.kind = PluginParam<Float>::String;
+        p.text = s;
+    }
+    p.source = s;
+    p.holder.set_plugin_name(s);
+}
+
+/// A number's JSON: the user's value unless traverse() changed it
+template <typename Float> std::string number_text(const PluginParam<Float> &p) {
+    if ((dr::scalar_t<Float>) p.given == p.value)
+        return json_number(p.given);
+    char buf[32];
+    std::snprintf(buf, sizeof(buf), "%.9g", (double) p.value);
+    return buf;
+}
+
+/// The core's JSON parameter object
+template <typename Float> std::string build_json(const std::vector<PluginParam<Float>> &params) {
+    using P = PluginParam<Float>;
+    std::string top, nested;
+    for (const P &p : params) {
+        std::string v;
+        switch (p.kind) {
+            case P::Number:
+                if (!std::isfinite(p.value))
+                    throw ParamError("parameter '" + p.name + "' must be finite");
+                v = number_text(p);
+                break;
+            case P::String: v = json_escape(p.text); break;
+            case P::Bool:
+            case P::Json: v = p.text; break;
+        }
+        std::string &dst = p.group.empty() ? top : nested;
+        dst += (dst.empty() ? "" : ", ") + json_escape(p.name) + ": " + v;
+    }
+    if (!nested.empty())
+        top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
+    return "{" + top + "}";
+}
+
+NAMESPACE_END(diffraction_detail)
+NAMESPACE_END(mitsuba)
