@@ -422,6 +422,10 @@ public:
     void parameters_changed(const std::vector<std::string> &keys) override {
         Base::parameters_changed(keys);
         try {
+            if (update_without_rebuild(keys)) {
+                m_saved = snapshot();
+                return;
+            }
             // Strings arrive as the plugin name of their Properties holder
             for (Param &p : m_params)
                 if ((p.kind == Param::String || p.kind == Param::Json) &&
@@ -590,28 +594,80 @@ private:
         }
     }
 
-    /// JIT variants: the parameters whose values carry gradients, by id,
-    /// for the programs (an empty list: the programs' own values, which a
-    /// frozen or symbolic kernel bakes in)
-    typename Jit::Params jit_params() const {
-        typename Jit::Params out;
-        if constexpr (dr::is_diff_v<Float>)
+    /// JIT variants: every parameter the programs read, by id, as one
+    /// array in memory (Program::run's `params`): the user's value where
+    /// given (mi.traverse's, with its gradient), else the programs' own.
+    /// Being read from memory, a new value changes no kernel.
+    void update_param_array() {
+        if constexpr (dr::is_jit_v<Float>) {
+            std::vector<float> built = m_jit.built_values();
+            Float a = dr::zeros<Float>(STAM_PARAMS);
+            for (uint32_t id = 0; id < STAM_PARAMS; ++id)
+                if (!std::isnan(built[id]))
+                    dr::scatter(a, Float(built[id]), UInt32(id));
             for (const Param &p : m_params)
-                if (p.kind == Param::Number && p.id >= 0 && dr::grad_enabled(p.diff)) {
-                    out.resize(STAM_PARAMS);
-                    out[p.id] = p.diff;
-                }
-        return out;
+                if (p.kind == Param::Number && p.id >= 0 && !std::isnan(built[p.id]))
+                    dr::scatter(a, p.diff, UInt32((uint32_t) p.id));
+            dr::make_opaque(a);
+            m_param_array = a;
+            m_built = std::move(built);
+        }
+    }
+
+    /// JIT variants, an update that changes only parameters the programs
+    /// read, each by at most MaxDriftWithoutRebuild of the value they were
+    /// built with: the programs stay (and with them the kernels), the new
+    /// values reach them through the parameter array. Else (false) the
+    /// material is rebuilt.
+    bool update_without_rebuild(const std::vector<std::string> &keys) {
+        if constexpr (dr::is_jit_v<Float>) {
+            if (keys.empty())
+                return false;
+            for (const std::string &k : keys) {
+                if (k == "twist")
+                    continue;
+                auto it = std::find_if(m_params.begin(), m_params.end(),
+                                       [&](const Param &p) { return p.name == k; });
+                if (it == m_params.end() || it->kind != Param::Number || it->id < 0 ||
+                    m_built.empty() || std::isnan(m_built[it->id]))
+                    return false;
+                ScalarFloat v = scalar_of(it->diff, it->name);
+                if (!(std::abs(v / m_built[it->id] - 1.f) <= MaxDriftWithoutRebuild))
+                    return false;
+            }
+            for (Param &p : m_params)
+                if (p.kind == Param::Number)
+                    p.value = scalar_of(p.diff, p.name);
+            m_twist = scalar_of(m_twist_diff, "twist");
+            check_frame();
+            update_param_array();
+            settle_twist();
+            return true;
+        } else {
+            DRJIT_MARK_USED(keys);
+            return false;
+        }
+    }
+
+    /// JIT variants: the twist in memory (a literal would make a kernel per
+    /// value), keeping a gradient the user gave it
+    void settle_twist() {
+        if constexpr (dr::is_jit_v<Float>) {
+            if (dr::grad_enabled(m_twist_diff))
+                dr::make_opaque(m_twist_diff);
+            else
+                m_twist_diff = dr::opaque<Float>(m_twist);
+        }
     }
 
     /// The twist's rotation (cos, sin): differentiable in JIT variants where
     /// the twist carries a gradient
     std::pair<Float, Float> twist_rotation() const {
-        if constexpr (dr::is_diff_v<Float>)
-            if (dr::grad_enabled(m_twist_diff)) {
-                auto [s, c] = dr::sincos(m_twist_diff * (dr::Pi<ScalarFloat> / 180.f));
-                return { c, s };
-            }
+        if constexpr (dr::is_jit_v<Float>) {
+            // From memory (no kernel per value), differentiable
+            auto [s, c] = dr::sincos(m_twist_diff * (dr::Pi<ScalarFloat> / 180.f));
+            return { c, s };
+        }
         return { Float(m_cos_twist), Float(m_sin_twist) };
     }
 
@@ -635,6 +691,7 @@ private:
             m_params[i] = s.params[i];
         m_twist = s.twist;
         m_twist_diff = Float(m_twist);
+        settle_twist();
         m_center_u = s.center_u;
         m_center_v = s.center_v;
         m_tracks = s.tracks;
@@ -666,6 +723,8 @@ private:
         if constexpr (dr::is_jit_v<Float>) {
             m_tables = c.jit.load_tables();
             m_jit = std::move(c.jit);
+            update_param_array();
+            settle_twist();
         }
         double t = (double) m_twist * M_PI / 180.0;
         m_cos_twist = (ScalarFloat) std::cos(t);
@@ -907,7 +966,7 @@ private:
                    const Float *sample1, const Point2f *sample2, bool want_value,
                    bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
-        const typename Jit::Params params = jit_params();
+        const Float &params = m_param_array;
         if (st.do_eval) {
             if (want_value)
                 q.value = dr::select(st.active_e,
@@ -968,8 +1027,17 @@ private:
     // array (traversed, so that dr.freeze sees them)
     Jit m_jit;
     FloatStorage m_tables;
+    // Every parameter the programs read, by id (update_param_array), and
+    // the values they were built with (NaN: not read)
+    Float m_param_array;
+    std::vector<float> m_built;
+    /// An update moving a parameter the programs read by at most this
+    /// (relative) keeps the programs (update_without_rebuild): their error
+    /// against the rebuilt material stays below 1e-4, 6e-4 for the RGB
+    /// table of isotropic metals (docs/jit.md, "Parameters")
+    static constexpr ScalarFloat MaxDriftWithoutRebuild = 0.02f;
 
-    MI_TRAVERSE_CB(Base, m_tables)
+    MI_TRAVERSE_CB(Base, m_tables, m_param_array, m_twist_diff)
 };
 
 MI_EXPORT_PLUGIN(Diffraction)

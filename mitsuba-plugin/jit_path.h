@@ -16,6 +16,7 @@
 #include <mitsuba/render/interaction.h>
 
 #include <algorithm>
+#include <cmath>
 #include <ostream>
 #include <string>
 #include <vector>
@@ -32,9 +33,9 @@ public:
     MI_IMPORT_TYPES()
     using Prog = program::Program<Float>;
     using FloatStorage = DynamicBuffer<Float>;
-    /// Values of the material's parameters by STAM_PARAM_* id (an entry of
-    /// width 0: the programs' own value), program.h's Program::run
-    using Params = std::vector<Float>;
+    /// Values of the material's parameters by STAM_PARAM_* id (STAM_PARAMS
+    /// values; width 0: the programs' own values), program.h's Program::run
+    using Params = Float;
 
     static constexpr bool IsSpectral = is_spectral_v<Spectrum>;
     static constexpr bool IsMono = is_monochromatic_v<Spectrum>;
@@ -112,6 +113,16 @@ public:
                 if (std::find(ids.begin(), ids.end(), id) == ids.end())
                     ids.push_back(id);
         return ids;
+    }
+
+    /// The value the programs were built with of each parameter they read,
+    /// by id (NaN for the others)
+    std::vector<float> built_values() const {
+        std::vector<float> v(STAM_PARAMS, std::nanf(""));
+        for (const Prog *p : { &m_eval, &m_pdf, &m_sample, &m_coherent })
+            for (size_t k = 0; k < p->param_ids().size(); ++k)
+                v[p->param_ids()[k]] = p->param_values()[k];
+        return v;
     }
 
     /// "eval N ops M gathers, ..., tables K values" (the object's string form)

@@ -286,18 +286,20 @@ public:
     size_t n_outputs() const { return m_code.outputs.size(); }
     size_t n_instructions() const { return m_code.code.size(); }
     size_t n_gathers() const { return m_code.gathers; }
-    /// The ids (STAM_PARAM_*) of the parameters the program reads.
+    /// The ids (STAM_PARAM_*) of the parameters the program reads, and the
+    /// values it was built with.
     const std::vector<uint32_t> &param_ids() const { return m_code.param_id; }
+    const std::vector<float> &param_values() const { return m_code.param_value; }
 
     /// The outputs for `inputs` (n_inputs arrays), one Dr.Jit operation per
     /// instruction; `tables` is the buffer the constructor's storage was
-    /// loaded into. `params` (indexed by STAM_PARAM_* id; may be shorter)
-    /// gives the values of the parameters the program reads where an entry
-    /// is initialised (width > 0: a differentiated or textured value), else
-    /// the program's own.
+    /// loaded into. `params` (STAM_PARAMS values, indexed by STAM_PARAM_*
+    /// id) gives the values of the parameters the program reads (read from
+    /// memory: changing them changes no kernel; gradients flow back into
+    /// them); width 0: the program's own values, as constants.
     template <typename Storage>
     std::vector<Float> run(const std::vector<Float> &inputs, const Storage &tables,
-                           const std::vector<Float> &params = {}) const {
+                           const Float &params = Float()) const {
         if (inputs.size() != m_code.n_inputs)
             throw std::runtime_error("program: " + std::to_string(inputs.size()) +
                                      " inputs given, it takes " +
@@ -338,13 +340,11 @@ public:
                 case Op::Not: m[i] = !m[in.a]; break;
                 case Op::Select: f[i] = dr::select(m[in.a], fb, fc); break;
                 case Op::Gather: f[i] = gather(in.a, fb, tables); break;
-                case Op::Param: {
-                    uint32_t id = m_code.param_id[in.a];
-                    f[i] = id < params.size() && dr::width(params[id]) > 0
-                               ? params[id]
+                case Op::Param:
+                    f[i] = dr::width(params) == STAM_PARAMS
+                               ? dr::gather<Float>(params, UInt32(m_code.param_id[in.a]))
                                : Float(m_code.param_value[in.a]);
                     break;
-                }
             }
             for (uint32_t r : m_code.last_use[i]) {
                 f[r] = Float();

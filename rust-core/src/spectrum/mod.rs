@@ -94,11 +94,25 @@ pub fn gamut_map(rgb: [f64; 3]) -> [f64; 3] {
 pub fn gamut_map_program(rgb: [crate::program::Value; 3]) -> [crate::program::Value; 3] {
     let min = rgb[0].min(rgb[1]).min(rgb[2]);
     let y = rgb[0] * SRGB_LUMINANCE[0] + rgb[1] * SRGB_LUMINANCE[1] + rgb[2] * SRGB_LUMINANCE[2];
-    let s = min / (min - y);
     let inside = min.ge(0.0) | !min.finite();
     let dark = !y.gt(0.0);
-    rgb.map(|c| inside.select(c, dark.select(0.0, c + s * (y - c))))
+    // s = min / (min - y) is scale-free, but its derivative, (min dy - y
+    // dmin) / (min - y)^2, underflows f32 for colours below ~1e-19 (0 / 0
+    // in a renderer's automatic differentiation): there the colour is taken
+    // as 0 (f is 1e-19 of anything visible), from safe operands, so that no
+    // branch of the selects below has a singular derivative.
+    let tiny = !(min - y).abs().gt(GAMUT_MAP_TINY);
+    let mapped = !inside & !dark & !tiny;
+    let (min_s, y_s) = (mapped.select(min, -1.0), mapped.select(y, 1.0));
+    let s = min_s / (min_s - y_s);
+    rgb.map(|c| {
+        let c_s = mapped.select(c, 0.0);
+        inside.select(c, mapped.select(c_s + s * (y_s - c_s), 0.0))
+    })
 }
+
+/// Below this |min - Y| the program's gamut map gives 0 (see there).
+const GAMUT_MAP_TINY: f64 = 1e-18;
 /// Lowest wavenumber of the band, 1000 / 830 (1/um).
 pub const NU_MIN_PER_UM: f64 = 1000.0 / LAMBDA_MAX_NM;
 /// Highest wavenumber of the band, 1000 / 360 (1/um).
