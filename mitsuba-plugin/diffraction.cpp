@@ -192,12 +192,18 @@ warnings in Mitsuba's log, once per material (the core's
 
 The parameters the user gives, ``twist`` and ``tracks`` always and
 ``center_u``, ``center_v`` with concentric tracks are exposed through
-``mi.traverse`` (non-differentiable). Mitsuba's traversal carries numbers
+``mi.traverse``. In the AD variants (``llvm_ad_*``, ``cuda_ad_*``) the
+numbers the material's programs read are differentiable (for now the
+Gaussian model's ``sigma_um``, ``corr_um``, ``corr_x_um``, ``corr_y_um``,
+and ``twist`` of anisotropic materials; docs/inverse.md); the others are
+marked non-differentiable. Mitsuba's traversal carries numbers
 and registered types but no strings, so the string parameters travel as a
 ``mi.Properties`` whose plugin name is the value: ``params['fresnel'] =
 'gold'`` works (Mitsuba converts the string), and
 ``params['fresnel'].plugin_name()`` reads it. ``params.update()`` rebuilds
-the core material; a refused update raises, naming the parameter, and
+the core material (except, in JIT variants, when only differentiable
+numbers changed, each by at most 2%: the programs and kernels stay, the
+values reach them from memory); a refused update raises, naming the parameter, and
 leaves the material exactly as it was (values, frame and core), so later
 updates work. An update may not add or remove the coherent lobe (the
 component layout is fixed at construction).
@@ -258,14 +264,16 @@ using diffraction_detail::CorePtr;
 using diffraction_detail::excerpt;
 using diffraction_detail::json_escape;
 using diffraction_detail::build_json;
+using diffraction_detail::check_frame_params;
+using diffraction_detail::describe;
 using diffraction_detail::json_number;
 using diffraction_detail::number_text;
 using diffraction_detail::set_text;
 using diffraction_detail::JitPath;
 using diffraction_detail::param_id;
 using diffraction_detail::scalar_of;
-using diffraction_detail::ShapeKind;
 using diffraction_detail::shape_kind;
+using diffraction_detail::track_direction;
 using diffraction_detail::UvShape;
 using diffraction_detail::PolarDisk;
 using diffraction_detail::MeshWithoutUv;
@@ -471,22 +479,21 @@ public:
                                              Float sample1, const Point2f &sample2,
                                              Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFSample, active);
-        auto [bs, weight] = sample_impl(ctx, si, sample1, sample2, active);
-        return { bs, depolarizer<Spectrum>(weight) };
+        Query q = make_query(ctx, si, nullptr, &sample1, &sample2, false, false, active);
+        return { q.bs, depolarizer<Spectrum>(q.weight) };
     }
 
     Spectrum eval(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                   const Vector3f &wo, Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
-        auto [value, pdf] = eval_pdf_impl(ctx, si, wo, true, false, active);
-        DRJIT_MARK_USED(pdf);
-        return depolarizer<Spectrum>(value);
+        return depolarizer<Spectrum>(
+            make_query(ctx, si, &wo, nullptr, nullptr, true, false, active).value);
     }
 
     Float pdf(const BSDFContext &ctx, const SurfaceInteraction3f &si,
               const Vector3f &wo, Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
-        return eval_pdf_impl(ctx, si, wo, false, true, active).second;
+        return make_query(ctx, si, &wo, nullptr, nullptr, false, true, active).pdf;
     }
 
     std::pair<Spectrum, Float> eval_pdf(const BSDFContext &ctx,
@@ -494,8 +501,8 @@ public:
                                         const Vector3f &wo,
                                         Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
-        auto [value, pdf] = eval_pdf_impl(ctx, si, wo, true, true, active);
-        return { depolarizer<Spectrum>(value), pdf };
+        Query q = make_query(ctx, si, &wo, nullptr, nullptr, true, true, active);
+        return { depolarizer<Spectrum>(q.value), q.pdf };
     }
 
     std::tuple<Spectrum, Float, BSDFSample3f, Spectrum>
@@ -511,16 +518,7 @@ public:
     std::string to_string() const override {
         std::ostringstream oss;
         oss << "Diffraction[" << std::endl;
-        for (const Param &p : m_params) {
-            oss << "  " << p.name << " = ";
-            if (p.kind == Param::Number)
-                oss << number_text(p);
-            else if (p.kind == Param::String)
-                oss << json_escape(p.text);
-            else
-                oss << p.text;
-            oss << "," << std::endl;
-        }
+        describe(oss, m_params);
         oss << "  twist = " << m_twist << "," << std::endl
             << "  tracks = " << tracks_name(m_tracks);
         if (m_tracks == Tracks::Concentric)
@@ -672,13 +670,7 @@ private:
     }
 
     /// The plugin's frame parameters: finite, twist within a turn
-    void check_frame() const {
-        if (!std::isfinite(m_twist) || std::abs(m_twist) > 360.f)
-            throw ParamError("parameter 'twist' = " + json_number((double) m_twist) +
-                             " is out of range: accepted [-360, 360] degrees");
-        if (!std::isfinite(m_center_u) || !std::isfinite(m_center_v))
-            throw ParamError("parameters 'center_u' and 'center_v' must be finite");
-    }
+    void check_frame() const { check_frame_params(m_twist, m_center_u, m_center_v); }
 
     State snapshot() const {
         return State{ m_params, m_twist, m_center_u, m_center_v, m_tracks };
@@ -822,35 +814,7 @@ private:
         if (linear && dr::none_or<false>(disk && active))
             return { cos_t, sin_t };
 
-        // A disk's uv is polar: u = r, v = phi / 2 pi, dp_du = M e_r and
-        // dp_dv = 2 pi r M e_phi (M: its to_world); its object point is
-        // (r cos phi, r sin phi).
-        Float r = si.uv.x();
-        auto [sin_phi, cos_phi] = dr::sincos(dr::TwoPi<Float> * si.uv.y());
-        Vector3f e_phi_world =
-            si.dp_dv * dr::select(r > 1e-7f, dr::rcp(dr::TwoPi<Float> * r), 0.f);
-        Vector3f dir;
-        if (linear) {
-            // Generic: the shading tangent; disk: its object x axis
-            Vector3f disk_x = si.dp_du * cos_phi - e_phi_world * sin_phi;
-            dir = dr::select(disk, si.sh_frame.to_local(disk_x), Vector3f(1.f, 0.f, 0.f));
-        } else {
-            // Radial: from the centre to the point. Generic: the displacement
-            // dp_du du + dp_dv dv (exact for planar uv maps); disk: M (P - C)
-            // with C = (2 center_u - 1, 2 center_v - 1) in object units.
-            Float cx = 2.f * m_center_u - 1.f, cy = 2.f * m_center_v - 1.f;
-            Float c_r = cx * cos_phi + cy * sin_phi, c_phi = cy * cos_phi - cx * sin_phi;
-            Vector3f disk_r = si.dp_du * (r - c_r) - e_phi_world * c_phi;
-            Vector3f uv_r = si.dp_du * (si.uv.x() - m_center_u) +
-                            si.dp_dv * (si.uv.y() - m_center_v);
-            dir = si.sh_frame.to_local(dr::select(disk, disk_r, uv_r));
-        }
-        Float len = dr::sqrt(dr::square(dir.x()) + dr::square(dir.y()));
-        Mask ok = len > 1e-20f && dr::isfinite(len);
-        Float inv = dr::select(ok, dr::rcp(len), 0.f);
-        // Degenerate (the centre, no uv derivatives): the shading tangent
-        Float c0 = dr::select(ok, dir.x() * inv, 1.f),
-              s0 = dr::select(ok, dir.y() * inv, 0.f);
+        auto [c0, s0] = track_direction(si, disk, linear, m_center_u, m_center_v);
         return { c0 * cos_t - s0 * sin_t, s0 * cos_t + c0 * sin_t };
     }
 
@@ -990,20 +954,6 @@ private:
             }
             finish_sample(st, swo_c, spdf, coh, value, q);
         }
-    }
-
-    std::pair<UnpolarizedSpectrum, Float>
-    eval_pdf_impl(const BSDFContext &ctx, const SurfaceInteraction3f &si,
-                  const Vector3f &wo, bool want_value, bool want_pdf, Mask active) const {
-        Query q = make_query(ctx, si, &wo, nullptr, nullptr, want_value, want_pdf, active);
-        return { q.value, q.pdf };
-    }
-
-    std::pair<BSDFSample3f, UnpolarizedSpectrum>
-    sample_impl(const BSDFContext &ctx, const SurfaceInteraction3f &si, Float sample1,
-                const Point2f &sample2, Mask active) const {
-        Query q = make_query(ctx, si, nullptr, &sample1, &sample2, false, false, active);
-        return { q.bs, q.weight };
     }
 
     // ---- Members ----------------------------------------------------------

@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -113,6 +114,30 @@ template <typename Float> std::string build_json(const std::vector<PluginParam<F
     if (!nested.empty())
         top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
     return "{" + top + "}";
+}
+
+/// The parameters as the object's string form lists them ("  name = value,")
+template <typename Float>
+void describe(std::ostream &os, const std::vector<PluginParam<Float>> &params) {
+    for (const PluginParam<Float> &p : params) {
+        os << "  " << p.name << " = ";
+        if (p.kind == PluginParam<Float>::Number)
+            os << number_text(p);
+        else if (p.kind == PluginParam<Float>::String)
+            os << json_escape(p.text);
+        else
+            os << p.text;
+        os << "," << std::endl;
+    }
+}
+
+/// The plugin's frame parameters: finite, twist within a turn
+inline void check_frame_params(double twist, double center_u, double center_v) {
+    if (!std::isfinite(twist) || std::abs(twist) > 360.0)
+        throw ParamError("parameter 'twist' = " + json_number(twist) +
+                         " is out of range: accepted [-360, 360] degrees");
+    if (!std::isfinite(center_u) || !std::isfinite(center_v))
+        throw ParamError("parameters 'center_u' and 'center_v' must be finite");
 }
 
 NAMESPACE_END(diffraction_detail)

@@ -1,13 +1,15 @@
 /* shape_kind.h: how a shape defines a diffraction material's tracks
  * (diffraction.cpp, frame_rotation): through its uv parametrisation, as
  * Mitsuba's disk does (polar uv), or not at all (a mesh without texture
- * coordinates). No physics.
+ * coordinates); and the tracks' direction at a surface point. No physics.
  */
 #pragma once
 
 #include <mitsuba/render/shape.h>
 
 #include <string_view>
+#include <type_traits>
+#include <utility>
 #include <typeinfo>
 
 NAMESPACE_BEGIN(mitsuba)
@@ -55,6 +57,49 @@ uint32_t shape_kind(const Shape<Float, Spectrum> *shape) {
             return MeshWithoutUv;
     }
     return UvShape;
+}
+
+/// The direction (c, s) of the tracks in the local (xy) plane before the
+/// twist, for linear tracks (the shading tangent; a disk: its object x
+/// axis) or concentric ones (radial from the uv centre (center_u,
+/// center_v); a disk: from C = (2 center_u - 1, 2 center_v - 1) in object
+/// units). `disk`: the lanes on Mitsuba's disk (polar uv). Degenerate lanes
+/// (the centre, no uv derivatives) take the shading tangent.
+template <typename SurfaceInteraction, typename Mask, typename ScalarFloat>
+auto track_direction(const SurfaceInteraction &si, const Mask &disk, bool linear,
+                     ScalarFloat center_u, ScalarFloat center_v) {
+    using Vector3f = std::decay_t<decltype(si.wi)>;
+    using Float = std::decay_t<decltype(si.uv.x())>;
+    // A disk's uv is polar: u = r, v = phi / 2 pi, dp_du = M e_r and
+    // dp_dv = 2 pi r M e_phi (M: its to_world); its object point is
+    // (r cos phi, r sin phi).
+    Float r = si.uv.x();
+    auto [sin_phi, cos_phi] = dr::sincos(dr::TwoPi<Float> * si.uv.y());
+    Vector3f e_phi_world =
+        si.dp_dv * dr::select(r > 1e-7f, dr::rcp(dr::TwoPi<Float> * r), 0.f);
+    Vector3f dir;
+    if (linear) {
+        // Generic: the shading tangent; disk: its object x axis
+        Vector3f disk_x = si.dp_du * cos_phi - e_phi_world * sin_phi;
+        dir = dr::select(disk, si.sh_frame.to_local(disk_x), Vector3f(1.f, 0.f, 0.f));
+    } else {
+        // Radial: from the centre to the point. Generic: the displacement
+        // dp_du du + dp_dv dv (exact for planar uv maps); disk: M (P - C)
+        // with C = (2 center_u - 1, 2 center_v - 1) in object units.
+        Float cx = 2.f * center_u - 1.f, cy = 2.f * center_v - 1.f;
+        Float c_r = cx * cos_phi + cy * sin_phi, c_phi = cy * cos_phi - cx * sin_phi;
+        Vector3f disk_r = si.dp_du * (r - c_r) - e_phi_world * c_phi;
+        Vector3f uv_r = si.dp_du * (si.uv.x() - center_u) +
+                        si.dp_dv * (si.uv.y() - center_v);
+        dir = si.sh_frame.to_local(dr::select(disk, disk_r, uv_r));
+    }
+    Float len = dr::sqrt(dr::square(dir.x()) + dr::square(dir.y()));
+    Mask ok = len > 1e-20f && dr::isfinite(len);
+    Float inv = dr::select(ok, dr::rcp(len), 0.f);
+    // Degenerate (the centre, no uv derivatives): the shading tangent
+    Float c0 = dr::select(ok, dir.x() * inv, 1.f),
+          s0 = dr::select(ok, dir.y() * inv, 0.f);
+    return std::make_pair(c0, s0);
 }
 
 NAMESPACE_END(diffraction_detail)

@@ -30,6 +30,7 @@
 
 pub mod params;
 mod program;
+mod program_rgb;
 mod rgb;
 mod sampling;
 mod series;

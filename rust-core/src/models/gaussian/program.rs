@@ -32,12 +32,10 @@
 //!   The coherent probability follows the model's own albedo table
 //!   (isotropic surfaces) as native.
 
-use super::rgb::{column_limits, node_samples, D_U, D_V, MAP_R};
 use super::sampling::{AlbedoTable, BECKMANN_MIN_G};
-use super::series::{prefilter_2d, series_table_export, SeriesTableExport, SPLINE_MARGIN};
+use super::series::{series_table_export, SeriesTableExport};
 use super::{Gaussian, GaussianSurface, COHERENT_MAX_G};
-use crate::models::{FactorProgram, RgbRule, SampleProgram, Shading, SurfacePrograms};
-use crate::optics::fresnel::Fresnel;
+use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::lookup::bspline_weights;
@@ -46,16 +44,6 @@ use crate::sampling::program::{cosine_density_program, cosine_direction_program}
 use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM};
 use std::f64::consts::PI;
 
-/// g at the bluest node of the RGB program table's lowest row: below it the
-/// first term of the series carries all but ~g e^(x/2) / 4 of S (5e-6 at
-/// S = e^-12 of its peak), so the rows below repeat the lowest one (ln(S /
-/// g0) constant).
-const RGB_G_LO: f64 = 2e-8;
-/// Columns of the RGB program table reach where ln S of every node is below
-/// this: beyond it f is below f32's range whatever G and 1/w^2 are.
-const RGB_CUT: f64 = -250.0;
-/// Largest RGB program table (bytes).
-const RGB_MAX_BYTES: usize = 8 << 20;
 /// Mirror roughness exponent below which the sampling lobe is the series'
 /// mixture (above: Beckmann).
 pub const SERIES_MAX_G: f64 = 12.0;
@@ -93,7 +81,7 @@ impl SeriesLookup {
 /// The bicubic B-spline sums of `count` interleaved values per grid point:
 /// value l is sum_ab wu_a wv_b table[base + a row_len + b stride + l].
 #[allow(clippy::too_many_arguments)]
-fn bicubic<'a>(
+pub(super) fn bicubic<'a>(
     b: &'a Builder,
     table: Table,
     base: Value<'a>,
@@ -177,222 +165,6 @@ fn expm1<'a>(g: Value<'a>) -> Value<'a> {
                     + g * (1.0 / 24.0
                         + g * (1.0 / 120.0 + g * (1.0 / 720.0 + g * (1.0 / 5040.0)))))));
     g.lt(0.5).select(series, g.exp() - 1.0)
-}
-
-/// The RGB program's per-material table (see the module documentation).
-pub(crate) struct RgbProgramTable {
-    /// Values per grid point: 4 (ln N - ln g0 and the three channels over
-    /// N), 7 folded (and the channels' derivatives along the half-vector
-    /// cosine) or one per node (ln(k_j^2 S_j) - ln g0).
-    values: usize,
-    /// The grid holds the rule's sum (else the nodes).
-    combined: bool,
-    /// Channels hold the Fresnel-weighted rule (else the plain weights, to
-    /// be multiplied by F^2 at the pair's cosine); unused per node.
-    folded: bool,
-    /// The correlation length and sigma the folded channels' cosine was
-    /// computed with (cos_h^2 = x0 / T^2 + g0 / (4 sigma^2)).
-    corr_um: f64,
-    sigma_um: f64,
-    /// B0 of the folded channels: the program adds `cone_term`(cos_h) B0.
-    cos_slope: [f64; 3],
-    ln_g0_lo: f64,
-    rows: usize,
-    cols: usize,
-    inv_k_ref2: f64,
-    row_len: usize,
-    coef: Vec<f32>,
-}
-
-impl RgbProgramTable {
-    pub fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<RgbProgramTable>() + self.coef.len() * 4
-    }
-
-    /// The table of `surface` for `rule` and `fresnel`; `per_node` forces the
-    /// per-node layout (tests). None when the rule is empty or the table
-    /// would not fit RGB_MAX_BYTES.
-    fn build(
-        surface: &GaussianSurface,
-        rule: &RgbRule,
-        fresnel: &Fresnel,
-        per_node: bool,
-    ) -> Option<RgbProgramTable> {
-        let n = rule.len();
-        let k = &rule.k_per_um;
-        let sigma = surface.sigma_um;
-        if n == 0 || !(sigma > 0.0 && surface.corr_x_um > 0.0 && surface.corr_y_um > 0.0) {
-            return None;
-        }
-        let k_min = k.iter().cloned().fold(f64::INFINITY, f64::min);
-        let k_max = k.iter().cloned().fold(0.0, f64::max);
-        let k_ref2 = k_min * k_max;
-        let combined = !per_node && (fresnel.is_spectrally_flat() || surface.isotropic);
-        let folded = combined && !fresnel.is_spectrally_flat();
-        let values = match (combined, folded) {
-            (true, true) => 7,
-            (true, false) => 4,
-            _ => n,
-        };
-        // |w| <= 2, so g0 <= 4 sigma^2; down to g = RGB_G_LO at the bluest
-        // node, and at least 8 rows.
-        let ln_g0_hi = (4.0 * sigma * sigma).ln();
-        let ln_g0_lo = (RGB_G_LO / (k_max * k_max)).ln().min(ln_g0_hi - 8.0 * D_U);
-        let rows = ((ln_g0_hi - ln_g0_lo) / D_U).ceil() as usize + 2;
-        let limits = column_limits(surface, k, ln_g0_lo, rows, k_ref2, RGB_CUT);
-        let v_max = limits.iter().cloned().fold(0.0, f64::max);
-        let cols = (v_max.ceil() as usize + 2).max(4);
-        if 4 * values * (rows + 2) * (cols + 2) > RGB_MAX_BYTES {
-            return None;
-        }
-        let samples = node_samples(surface, k, ln_g0_lo, rows, cols, k_ref2, n);
-        let m = SPLINE_MARGIN;
-        let (ext_rows, ext_cols) = (rows + 2 * m, cols + 2 * m);
-        let mut grid = vec![0.0; ext_rows * ext_cols * values];
-        // The plain rule (F = 1) and the positive node weights of N.
-        let plain = RgbRule::new(n, &Fresnel::Constant(1.0));
-        let one = Fresnel::Constant(1.0);
-        let ln_m: Vec<f64> = (0..n)
-            .map(|j| {
-                let mut e = vec![0.0; n];
-                e[j] = 1.0;
-                let w = plain.integrate(&one, 1.0, &e);
-                (w[0].abs() + w[1].abs() + w[2].abs()).max(1e-12).ln()
-            })
-            .collect();
-        // The folded weights are linear in cos near 0, and cos_h = sqrt(x0 /
-        // T^2 + g0 / (4 sigma^2)) has a cone's point at the grid's bottom
-        // left (both directions grazing, near the mirror), which a spline
-        // cannot follow: the table holds the channels less `cone_term`(cos_h)
-        // B0, the program adds it back. B0 is the weights' slope at cos 0 for
-        // the spectrum there (g << 1, x0 -> 0: K_j ~ k_j^4), so what is left
-        // is even in cos_h near the point (up to a cos^3 term).
-        let cos_slope = if folded {
-            let ln_n0 = k
-                .iter()
-                .zip(&ln_m)
-                .map(|(k, w)| (4.0 * k.ln() + w).exp())
-                .sum::<f64>()
-                .ln();
-            let rel0: Vec<f64> = k.iter().map(|k| (4.0 * k.ln() - ln_n0).exp()).collect();
-            let (at0, at1) = (
-                rule.integrate(fresnel, 0.0, &rel0),
-                rule.integrate(fresnel, 1.0 / 256.0, &rel0),
-            );
-            std::array::from_fn(|c| (at1[c] - at0[c]) * 256.0)
-        } else {
-            [0.0; 3]
-        };
-        let (t2, sigma2) = (surface.corr_x_um * surface.corr_x_um, sigma * sigma);
-        // The folded channels at cosine `cos` for the nodes' shares `rel`,
-        // less `cone_term`(cos) B0. Past 1 (outside the pairs, inside the
-        // splines' reach) the weights continue as w(1 - d) + 2 d w'(1),
-        // which keeps their first two derivatives at 1 (a kink or a jump of
-        // curvature there costs 1e-3 at the rows of w ~ 2), with d
-        // saturating smoothly below 0.5.
-        let fold_at = |cos: f64, rel: &[f64]| -> [f64; 3] {
-            let at = |c: f64| rule.integrate(fresnel, c, rel);
-            let folded: [f64; 3] = if cos <= 1.0 {
-                at(cos)
-            } else {
-                let d = 0.5 * ((cos - 1.0) / 0.5).tanh();
-                let h = 1.0 / 256.0;
-                let (w0, w1, w2) = (at(1.0), at(1.0 - h), at(1.0 - 2.0 * h));
-                let back = at(1.0 - d);
-                let slope: [f64; 3] =
-                    std::array::from_fn(|i| (3.0 * w0[i] - 4.0 * w1[i] + w2[i]) / (2.0 * h));
-                std::array::from_fn(|i| back[i] + 2.0 * d * slope[i])
-            };
-            let cone = cone_term(cos);
-            std::array::from_fn(|i| folded[i] - cone * cos_slope[i])
-        };
-        let mut rel = vec![0.0; n];
-        for r in 0..ext_rows {
-            let ln_g0 = ln_g0_lo + (r as f64 - m as f64) * D_U;
-            let g0 = ln_g0.exp();
-            for c in 0..ext_cols {
-                let point = &samples[(r * ext_cols + c) * n..][..n];
-                let out = &mut grid[(r * ext_cols + c) * values..][..values];
-                if !combined {
-                    for (o, &l) in out.iter_mut().zip(point) {
-                        *o = l - ln_g0;
-                    }
-                    continue;
-                }
-                let top = point
-                    .iter()
-                    .zip(&ln_m)
-                    .map(|(l, w)| l + w)
-                    .fold(f64::NEG_INFINITY, f64::max);
-                let total: f64 = point
-                    .iter()
-                    .zip(&ln_m)
-                    .map(|(l, w)| (l + w - top).exp())
-                    .sum();
-                let ln_n = top + total.ln();
-                for (o, &l) in rel.iter_mut().zip(point) {
-                    *o = (l - ln_n).exp();
-                }
-                if folded {
-                    // cos_h^2 = (u^2 + v^2 + w^2) / 4 = x0 / T^2 + g0 / (4
-                    // sigma^2): the channels at this cosine, and their
-                    // derivative along it, with which the program follows
-                    // the cosine where the parameters it reads differ from
-                    // the ones the table was built with.
-                    let vv = (c as f64 - m as f64).abs() * D_V;
-                    let x0 = rho2_at(vv) * (1.0 / k_ref2 + g0);
-                    let cos = (x0 / t2 + g0 / (4.0 * sigma2)).sqrt();
-                    let at = |c: f64| fold_at(c, &rel);
-                    let h = 1.0 / 256.0;
-                    let (lo, hi) = ((cos - h).max(0.0), cos + h);
-                    let (a, z) = (at(lo), at(hi));
-                    out[1..4].copy_from_slice(&at(cos));
-                    for i in 0..3 {
-                        out[4 + i] = (z[i] - a[i]) / (hi - lo);
-                    }
-                } else {
-                    out[1..4].copy_from_slice(&plain.integrate(&one, 1.0, &rel));
-                }
-                out[0] = ln_n - ln_g0;
-            }
-        }
-        prefilter_2d(&mut grid, ext_rows, ext_cols, values);
-        // One coefficient beyond each end of the rows and columns.
-        let row_len = (cols + 2) * values;
-        let mut coef = Vec::with_capacity((rows + 2) * row_len);
-        for r in m - 1..m + rows + 1 {
-            let src = &grid[(r * ext_cols + m - 1) * values..][..row_len];
-            coef.extend(src.iter().map(|&v| v as f32));
-        }
-        Some(RgbProgramTable {
-            values,
-            combined,
-            folded,
-            corr_um: surface.corr_x_um,
-            sigma_um: sigma,
-            cos_slope,
-            ln_g0_lo,
-            rows,
-            cols,
-            inv_k_ref2: 1.0 / k_ref2,
-            row_len,
-            coef,
-        })
-    }
-}
-
-/// cos e^(-4 cos^2): cos near the cone's point (cos = 0), nothing at the
-/// rows of w ~ 2 (whose neighbours beyond cos = 1 only the table's splines
-/// see), smooth everywhere.
-fn cone_term(cos: f64) -> f64 {
-    cos * (-4.0 * cos * cos).exp()
-}
-
-/// rho0^2 at column coordinate vv = v D_V (`rgb.rs`'s map, inverted).
-fn rho2_at(vv: f64) -> f64 {
-    let v4 = vv * vv * vv * vv;
-    let a = v4 / (MAP_R * MAP_R);
-    0.5 * (a + (a * a + 4.0 * v4).sqrt())
 }
 
 /// The sampling strategy's parameters at one wi and wavelength.
@@ -789,7 +561,7 @@ impl GaussianSurface {
     /// sigma, Tx and Ty as the program's parameters (`Op::Param`: a
     /// renderer may change them): sigma_um, and corr_um for both axes of
     /// an isotropic surface, else corr_x_um and corr_y_um.
-    fn params_program<'a>(&self, b: &'a Builder) -> (Value<'a>, Value<'a>, Value<'a>) {
+    pub(super) fn params_program<'a>(&self, b: &'a Builder) -> (Value<'a>, Value<'a>, Value<'a>) {
         let sigma = b.param(ParamId::SigmaUm, self.sigma_um);
         if self.isotropic {
             let t = b.param(ParamId::CorrUm, self.corr_x_um);
@@ -990,199 +762,7 @@ impl SurfacePrograms for Gaussian {
     }
 }
 
-/// f / G in linear sRGB from the RGB program table.
-fn rgb_from_table<'a>(
-    b: &'a Builder,
-    t: &RgbProgramTable,
-    s: &GaussianSurface,
-    shading: &Shading,
-    pair: &PairProgram<'a>,
-) -> [Value<'a>; 3] {
-    let table = b.table(t.coef.clone());
-    let (sigma, tx, ty) = s.params_program(b);
-    let sw = (pair.w * sigma).abs();
-    let g0 = sw * sw;
-    let ln_g0 = sw.ln() * 2.0;
-    let x0 = pair.u * pair.u * (tx * tx * 0.25) + pair.v * pair.v * (ty * ty * 0.25);
-    // Rows: below the lowest the values repeat it (ln(S / g0) constant).
-    let fu = ((ln_g0 - t.ln_g0_lo) * (1.0 / D_U)).clamp(0.0, (t.rows - 1) as f64);
-    let iu = fu.floor().min((t.rows - 2) as f64);
-    let rho2 = x0 / (g0 + t.inv_k_ref2);
-    let fv = (rho2 / (rho2 * (1.0 / (MAP_R * MAP_R)) + 1.0).sqrt()).sqrt() * (1.0 / D_V);
-    let inside = fv.lt((t.cols - 1) as f64);
-    let fv = fv.min((t.cols - 1) as f64);
-    let iv = fv.floor().min((t.cols - 2) as f64);
-    let base = iu * t.row_len as f64 + iv * t.values as f64;
-    let wu = bspline_weights(fu - iu);
-    let wv = bspline_weights(fv - iv);
-    let v = bicubic(b, table, base, t.row_len, t.values, t.values, wu, wv);
-    // K_j = Tx Ty / (4 pi w^2) k_j^2 S_j = sigma^2 Tx Ty / (4 pi g0) k_j^2 S_j.
-    let ln_scale = (sigma * sigma * tx * ty * (1.0 / (4.0 * PI))).ln();
-    let rgb = if t.combined {
-        let n = (v[0] + ln_scale).exp();
-        if t.folded {
-            let c = pair.cos_half;
-            let cone = c * (c * c * -4.0).exp();
-            // The cosine the table's point had at the parameters it was
-            // built with; where the program's parameters differ, the
-            // channels follow the pair's cosine to first order.
-            let cos_table = (x0 * (1.0 / (t.corr_um * t.corr_um))
-                + g0 * (1.0 / (4.0 * t.sigma_um * t.sigma_um)))
-                .sqrt();
-            let dc = c - cos_table;
-            std::array::from_fn(|i| dc.fma(v[4 + i], cone.fma(t.cos_slope[i], v[1 + i])) * n)
-        } else {
-            let scale = n * shading.fresnel.program(b, pair.cos_half, b.c(550.0));
-            [v[1] * scale, v[2] * scale, v[3] * scale]
-        }
-    } else {
-        let kernel: Vec<Value> = v.iter().map(|&l| (l + ln_scale).exp()).collect();
-        weighted_sum(b, shading, pair.cos_half, &kernel)
-    };
-    rgb.map(|c| inside.select(c, 0.0))
-}
-
-/// The RGB rule's Fresnel-weighted sum of `values` (the nodes') at `cos`,
-/// as `RgbRule::integrate_program`. For a metal's folded weights w_jc(cos)
-/// (257 cosine rows, linear between them) in their low-rank form: with the
-/// rows' singular vectors, w_jc(cos) = sum_p phi_p(cos) A_pjc to 1e-6 of
-/// the largest weight in P ~ 6 terms (the rows of every metal are nearly
-/// combinations of a few cosine profiles), so the sum is sum_p phi_p(cos)
-/// (sum_j values_j A_pjc): 2 P gathers of phi instead of 6 N of the
-/// weights.
-fn weighted_sum<'a>(
-    b: &'a Builder,
-    shading: &Shading,
-    cos: Value<'a>,
-    values: &[Value<'a>],
-) -> [Value<'a>; 3] {
-    let rule = shading.rgb_rule;
-    let fresnel = shading.fresnel;
-    if fresnel.is_spectrally_flat() {
-        return rule.integrate_program(b, fresnel, cos, values);
-    }
-    let (bins, rows) = rule.export_weights(fresnel);
-    let n = rule.len();
-    let Some((phi, a)) = low_rank(&rows, bins + 1, 3 * n, 1e-6) else {
-        return rule.integrate_program(b, fresnel, cos, values);
-    };
-    let rank = a.len();
-    let table = b.table(phi.iter().map(|&v| v as f32).collect());
-    let cos = cos.finite().select(cos, 0.0);
-    let t = cos.clamp(0.0, 1.0) * bins as f64;
-    let row = t.floor().min((bins - 1) as f64);
-    let frac = t - row;
-    let base = row * rank as f64;
-    let profile: Vec<Value> = (0..rank)
-        .map(|p| {
-            let lo = b.gather(table, base + p as f64);
-            let hi = b.gather(table, base + (rank + p) as f64);
-            lo + (hi - lo) * frac
-        })
-        .collect();
-    std::array::from_fn(|c| {
-        let per_rank = (0..rank).map(|p| {
-            let mut acc = values[0] * a[p][c];
-            for (j, &v) in values.iter().enumerate().skip(1) {
-                acc = v.fma(a[p][3 * j + c], acc);
-            }
-            acc * profile[p]
-        });
-        per_rank.reduce(|x, y| x + y).unwrap_or_else(|| b.c(0.0))
-    })
-}
-
-/// The rank-P form of a `rows` x `cols` matrix given as rows of triples
-/// (cols = 3 per triple): phi (rows x P, row-major) and A (P rows of cols)
-/// with |M - phi A| <= `tolerance` max |M| everywhere, P the smallest such
-/// (from the eigenvectors of M^T M by cyclic Jacobi); None when no P <=
-/// cols / 2 reaches it.
-fn low_rank(
-    m: &[[f64; 3]],
-    rows: usize,
-    cols: usize,
-    tolerance: f64,
-) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
-    let flat: Vec<f64> = m.iter().flatten().copied().collect();
-    if flat.len() != rows * cols || cols == 0 {
-        return None;
-    }
-    let at = |r: usize, c: usize| flat[r * cols + c];
-    let largest = flat.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    // Gram matrix and its eigenvectors.
-    let mut g = vec![vec![0.0; cols]; cols];
-    for row in flat.chunks_exact(cols) {
-        for (gi, &ri) in g.iter_mut().zip(row) {
-            for (gij, &rj) in gi.iter_mut().zip(row) {
-                *gij += ri * rj;
-            }
-        }
-    }
-    let mut v: Vec<Vec<f64>> = (0..cols)
-        .map(|i| (0..cols).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
-        .collect();
-    for _ in 0..60 {
-        let mut off = 0.0;
-        for p in 0..cols {
-            for q in p + 1..cols {
-                off += g[p][q] * g[p][q];
-                if g[p][q].abs() < 1e-300 {
-                    continue;
-                }
-                let theta = (g[q][q] - g[p][p]) / (2.0 * g[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
-                for gk in g.iter_mut() {
-                    let (gkp, gkq) = (gk[p], gk[q]);
-                    gk[p] = c * gkp - s * gkq;
-                    gk[q] = s * gkp + c * gkq;
-                }
-                let (head, tail) = g.split_at_mut(q);
-                for (gpk, gqk) in head[p].iter_mut().zip(tail[0].iter_mut()) {
-                    let (x, y) = (*gpk, *gqk);
-                    *gpk = c * x - s * y;
-                    *gqk = s * x + c * y;
-                }
-                for row in v.iter_mut() {
-                    let (vp, vq) = (row[p], row[q]);
-                    row[p] = c * vp - s * vq;
-                    row[q] = s * vp + c * vq;
-                }
-            }
-        }
-        if off < 1e-30 * largest.powi(4) {
-            break;
-        }
-    }
-    let mut order: Vec<usize> = (0..cols).collect();
-    order.sort_by(|&x, &y| g[y][y].total_cmp(&g[x][x]));
-    for rank in 1..=cols / 2 {
-        let basis: Vec<Vec<f64>> = order[..rank]
-            .iter()
-            .map(|&e| (0..cols).map(|i| v[i][e]).collect())
-            .collect();
-        let phi: Vec<f64> = (0..rows)
-            .flat_map(|r| {
-                basis
-                    .iter()
-                    .map(|u| (0..cols).map(|i| at(r, i) * u[i]).sum::<f64>())
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        let worst = (0..rows)
-            .flat_map(|r| (0..cols).map(move |c| (r, c)))
-            .map(|(r, c)| {
-                let approx: f64 = (0..rank).map(|p| phi[r * rank + p] * basis[p][c]).sum();
-                (approx - at(r, c)).abs()
-            })
-            .fold(0.0, f64::max);
-        if worst <= tolerance * largest {
-            return Some((phi, basis));
-        }
-    }
-    None
-}
+pub(crate) use super::program_rgb::{rgb_from_table, weighted_sum, RgbProgramTable};
 
 #[cfg(test)]
 #[path = "program_tests.rs"]
