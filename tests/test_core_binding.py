@@ -578,7 +578,7 @@ def test_program_parameters():
     with F.Brdf({'surface': 'gaussian', 'sigma_um': sigma, 'corr_um': corr,
                  'fresnel': 0.9}) as b:
         prog = b.export_program(F.PROGRAM_EVAL_SPECTRAL)
-    assert sorted(n for n, _ in F.decode_program(prog).params) == ['corr_um', 'sigma_um']
+    assert sorted(n for n, _ in F.decode_program(prog).params) == ['corr_um', 'fresnel', 'sigma_um']
     x = np.concatenate([wi, wo, np.full((len(wi), 1), lam)], axis=1)
     for name, value in (('sigma_um', sigma * 1.02), ('corr_um', corr * 0.98)):
         changed = {'sigma_um': sigma, 'corr_um': corr, name: value}

@@ -508,19 +508,22 @@ pub fn conductor_reflectance(cos_theta: f64, eta: f64, k: f64) -> f64 {
     }
 }
 
-/// `conductor_reflectance` as program operations (crate::program).
+/// `conductor_reflectance` as program operations (crate::program), with
+/// eta and k as registers (the material's `Op::Param`s, so that a renderer
+/// can differentiate them; the formula is smooth in both away from the
+/// clamps at 0 and 1, which a physical index never reaches).
 pub fn conductor_reflectance_program<'a>(
     b: &'a crate::program::Builder,
     cos_theta: crate::program::Value<'a>,
-    eta: f64,
-    k: f64,
+    eta: crate::program::Value<'a>,
+    k: crate::program::Value<'a>,
 ) -> crate::program::Value<'a> {
     let c = cos_theta.finite().select(cos_theta, 0.0).clamp(0.0, 1.0);
     let c2 = c * c;
     let s2 = 1.0 - c2;
     let (eta2, k2) = (eta * eta, k * k);
     let t0 = (eta2 - k2) - s2;
-    let a2_plus_b2 = (t0 * t0 + 4.0 * eta2 * k2).sqrt();
+    let a2_plus_b2 = (t0 * t0 + eta2 * k2 * 4.0).sqrt();
     let a = ((a2_plus_b2 + t0) * 0.5).max(0.0).sqrt();
     let t1 = a2_plus_b2 + c2;
     let t2 = a * c * 2.0;

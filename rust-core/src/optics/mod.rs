@@ -7,5 +7,7 @@ pub mod geometry;
 /// Optical constants (eta, k) of aluminium, silver, gold, copper and chromium
 /// at 350..850 nm, generated from Mitsuba 3's data files.
 pub mod metals;
+#[cfg(test)]
+mod param_tests;
 /// The pair geometry and Fresnel lookups as program operations.
 pub mod program;

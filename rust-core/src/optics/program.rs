@@ -6,7 +6,7 @@
 use super::fresnel::{conductor_reflectance_program, Fresnel};
 use super::geometry::MIN_COS;
 use crate::program::lookup::catmull_rom_weights;
-use crate::program::{Builder, Mask, Value};
+use crate::program::{Builder, Mask, ParamId, Value};
 
 /// A direction as three registers.
 pub type Vec3<'a> = [Value<'a>; 3];
@@ -97,11 +97,17 @@ impl<'a> PairProgram<'a> {
 impl Fresnel {
     /// The reflectance at `cos` and `lambda_nm` as `reflectance` computes
     /// it: a constant; a complex index's formula; a metal's grid
-    /// (Catmull-Rom over sqrt(cos), linear between wavelength rows).
+    /// (Catmull-Rom over sqrt(cos), linear between wavelength rows). The
+    /// constant and the complex index are the material's parameters
+    /// (`Op::Param`: ParamId::Fresnel; ParamId::Eta and ParamId::K), which a
+    /// renderer can differentiate; a measured metal's tables are not.
     pub fn program<'a>(&self, b: &'a Builder, cos: Value<'a>, lambda_nm: Value<'a>) -> Value<'a> {
         match self {
-            Fresnel::Constant(r) => b.c(*r),
-            Fresnel::ComplexIndex { eta, k } => conductor_reflectance_program(b, cos, *eta, *k),
+            Fresnel::Constant(r) => b.param(ParamId::Fresnel, *r),
+            Fresnel::ComplexIndex { eta, k } => {
+                let (eta, k) = (b.param(ParamId::Eta, *eta), b.param(ParamId::K, *k));
+                conductor_reflectance_program(b, cos, eta, k)
+            }
             Fresnel::Metal { .. } => self.grid_program(b, cos, lambda_nm),
         }
     }

@@ -2,6 +2,7 @@
 //! chi-square goodness-of-fit harness of the sampling strategies.
 
 pub mod chi2;
+pub mod params;
 pub mod programs;
 
 use glam::DVec3;

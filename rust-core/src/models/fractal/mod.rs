@@ -47,6 +47,8 @@
 
 mod build;
 mod math;
+#[cfg(test)]
+mod param_tests;
 pub mod params;
 mod profile;
 mod program;

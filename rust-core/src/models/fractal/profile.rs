@@ -226,17 +226,24 @@ impl StableProfile {
     /// What `ln_phi_at_ln` reads, for the programs (`program.rs`): the
     /// same switch points, run-time series and table, the table as the
     /// coefficients of each cell's Hermite cubic in t (`hermite` expanded:
-    /// c0 + t (c1 + t (c2 + t c3))).
+    /// c0 + t (c1 + t (c2 + t c3))). The programs hold them in f32: the
+    /// node values c0 and slopes c1 are rounded first and c2, c3 solved
+    /// from the rounded ones, so that neighbouring cells meet in value and
+    /// slope to the rounding of c2 and c3 (~1e-7 of the curvature terms)
+    /// rather than of ln Phi itself (~1e-7 of |ln Phi|: a step that a
+    /// derivative along a parameter would see).
     pub(super) fn program_parts(&self) -> ProfileParts {
         let d = &*self.inner;
         let h = d.h;
+        let r = |x: f64| x as f32 as f64;
         let cells = d
             .table
             .windows(2)
             .map(|w| {
                 let ([f0, d0], [f1, d1]) = (w[0], w[1]);
-                let (hd0, hd1, df) = (h * d0, h * d1, f1 - f0);
-                [f0, hd0, 3.0 * df - 2.0 * hd0 - hd1, hd0 + hd1 - 2.0 * df]
+                let (c0, hd0, hd1) = (r(f0), r(h * d0), r(h * d1));
+                let df = r(f1) - c0;
+                [c0, hd0, 3.0 * df - 2.0 * hd0 - hd1, hd0 + hd1 - 2.0 * df]
             })
             .collect();
         ProfileParts {

@@ -1,6 +1,10 @@
 //! The fractal model's programs for tracing renderers (crate::program,
 //! docs/jit.md): the same physics as its native path, as array operations.
 //!
+//! - Parameters (`Op::Param`): sigma_um and lag_um in the eval programs,
+//!   through ln a's constant ln(sigma^2 / 2) - alpha ln(lag) (two logs);
+//!   hurst selects the profile's table and stays a constant, as do the
+//!   sampling programs' scales.
 //! - K (`kernel_program`) as `FractalSurface::kernel`: y = ln(k r s), ln Phi(e^y)
 //!   from the profile's own table (the Hermite cubic of `ln_phi_at_ln`, one
 //!   cell's four coefficients: 4 gathers) and its two run-time series
@@ -34,7 +38,7 @@ use super::{Fractal, FractalSurface, LN_4PI2};
 use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
-use crate::program::{Builder, Table, Value};
+use crate::program::{Builder, ParamId, Table, Value};
 use crate::sampling::{rgb_sampling_nodes, DEFENSIVE_FRACTION};
 use crate::spectrum::wavenumber_per_um;
 use std::f64::consts::PI;
@@ -163,6 +167,16 @@ impl<'a> ProfileProgram<'a> {
 }
 
 impl FractalSurface {
+    /// `ln_a_const` = ln(sigma^2 / 2) - alpha ln(lag) from the material's
+    /// parameters sigma_um and lag_um (`Op::Param`, which a renderer can
+    /// differentiate: K depends on them through this constant only, the
+    /// profile's table on alpha = 2 hurst only, which stays a constant).
+    fn ln_a_const_program<'a>(&self, b: &'a Builder) -> Value<'a> {
+        let sigma = b.param(ParamId::SigmaUm, self.sigma_um);
+        let lag = b.param(ParamId::LagUm, self.lag_um);
+        sigma.ln() * 2.0 - lag.ln().fma(self.alpha, std::f64::consts::LN_2)
+    }
+
     /// ln of the lobe's scale c = k times the projected scale at the
     /// mirror (w = 2 cos_i), `build_component`'s ln_c, as
     /// `ln_k (1 - 2/alpha) + shared`, shared from `lobe_scale_shared`.
@@ -208,7 +222,8 @@ impl SurfacePrograms for Fractal {
         let ln_k = k_per_um.ln();
         let ln_w = pair.w.abs().ln();
         // ln s = -(2 ln(k |w|) + ln_a_const) / alpha; y = ln(k r) + ln s.
-        let ln_s = (ln_k + ln_w) * (-2.0 * f.inv_alpha) - f.inv_alpha * f.ln_a_const;
+        let ln_a_const = f.ln_a_const_program(b);
+        let ln_s = (ln_k + ln_w) * (-2.0 * f.inv_alpha) - ln_a_const * f.inv_alpha;
         let ln_r2 = (pair.u * pair.u + pair.v * pair.v).ln();
         let y = ln_r2 * 0.5 + ln_k + ln_s;
         let phi = profile.ln_phi(y, profile.vars(y));
@@ -232,7 +247,8 @@ impl SurfacePrograms for Fractal {
         let rule = shading.rgb_rule;
         let profile = ProfileProgram::new(b, f);
         let ln_w = pair.w.abs().ln();
-        let ln_s0 = ln_w * (-2.0 * f.inv_alpha) - f.inv_alpha * f.ln_a_const;
+        let ln_a_const = f.ln_a_const_program(b);
+        let ln_s0 = ln_w * (-2.0 * f.inv_alpha) - ln_a_const * f.inv_alpha;
         let y_base = (pair.u * pair.u + pair.v * pair.v).ln() * 0.5 + ln_s0;
         // Node j: y_j = y_base + d_j and ln K_j = a + 2 d_j + ln Phi(y_j),
         // d_j = ln k_j (1 - 2/alpha).

@@ -19,6 +19,9 @@ struct Mat {
     sigma: f64,
     corr: (f64, Option<f64>),
     fresnel: &'static str,
+    /// The Fresnel term's parameters (a constant, a complex index: the
+    /// programs read them too; optics/param_tests.rs checks them).
+    fresnel_params: &'static [(ParamId, f64)],
 }
 
 const MATS: [Mat; 6] = [
@@ -27,36 +30,42 @@ const MATS: [Mat; 6] = [
         sigma: 0.1,
         corr: (2.0, None),
         fresnel: "0.9",
+        fresnel_params: &[(ParamId::Fresnel, 0.9)],
     },
     Mat {
         name: "aluminium",
         sigma: 0.1,
         corr: (2.0, None),
         fresnel: "\"aluminium\"",
+        fresnel_params: &[],
     },
     Mat {
         name: "rough gold",
         sigma: 0.5,
         corr: (5.0, None),
         fresnel: "\"gold\"",
+        fresnel_params: &[],
     },
     Mat {
         name: "complex index",
         sigma: 0.3,
         corr: (3.0, None),
         fresnel: "{\"eta\":1.5,\"k\":0}",
+        fresnel_params: &[(ParamId::Eta, 1.5), (ParamId::K, 0.0)],
     },
     Mat {
         name: "brushed aluminium",
         sigma: 0.15,
         corr: (1.0, Some(15.0)),
         fresnel: "\"aluminium\"",
+        fresnel_params: &[],
     },
     Mat {
         name: "brushed 0.9",
         sigma: 0.15,
         corr: (1.0, Some(15.0)),
         fresnel: "0.9",
+        fresnel_params: &[(ParamId::Fresnel, 0.9)],
     },
 ];
 
@@ -99,7 +108,8 @@ impl Mat {
 
 /// The program's parameter values (by slot) for the material `m`.
 fn values(p: &Program, m: &Mat) -> Vec<f64> {
-    let given = m.params();
+    let mut given = m.params();
+    given.extend(m.fresnel_params);
     p.params
         .iter()
         .map(|&(id, _)| {
@@ -181,7 +191,12 @@ fn changed_parameters_give_the_changed_material() {
         let b = m.brdf();
         for kind in KINDS {
             let p = exported(&b, kind).unwrap();
-            assert_eq!(p.params.len(), m.params().len(), "{} {kind:?}", m.name);
+            assert_eq!(
+                p.params.len(),
+                m.params().len() + m.fresnel_params.len(),
+                "{} {kind:?}",
+                m.name
+            );
             for (id, _) in m.params() {
                 for factor in [0.98, 0.995, 1.005, 1.02] {
                     let changed = m.with(id, factor);
