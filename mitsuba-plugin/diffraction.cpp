@@ -193,10 +193,11 @@ warnings in Mitsuba's log, once per material (the core's
 The parameters the user gives, ``twist`` and ``tracks`` always and
 ``center_u``, ``center_v`` with concentric tracks are exposed through
 ``mi.traverse``. In the AD variants (``llvm_ad_*``, ``cuda_ad_*``) the
-numbers the material's programs read are differentiable (for now the
-Gaussian model's ``sigma_um``, ``corr_um``, ``corr_x_um``, ``corr_y_um``,
-and ``twist`` of anisotropic materials; docs/inverse.md); the others are
-marked non-differentiable. Mitsuba's traversal carries numbers
+numbers the material's programs read are differentiable (the Gaussian
+model's ``sigma_um`` and correlation lengths, the fractal's ``sigma_um``
+and ``lag_um``, a constant ``fresnel``, ``eta`` and ``k``, and ``twist`` of
+anisotropic materials; docs/inverse.md); the others are marked
+non-differentiable. Mitsuba's traversal carries numbers
 and registered types but no strings, so the string parameters travel as a
 ``mi.Properties`` whose plugin name is the value: ``params['fresnel'] =
 'gold'`` works (Mitsuba converts the string), and

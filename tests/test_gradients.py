@@ -1,9 +1,11 @@
 """Gradients of rendered images with respect to the `diffraction` BSDF's
 parameters (issue 14), in the AD variants with Dr.Jit's default flags.
 
-The parameters the material's programs read (STAM_PARAM_* in stam.h; for
-now the Gaussian model's sigma_um and correlation lengths, and the plugin's
-twist) are differentiable in mi.traverse; the others are not. For each, the
+The parameters the material's programs read (STAM_PARAM_* in stam.h: the
+Gaussian model's sigma_um and correlation lengths, the fractal's sigma_um
+and lag_um, the constant Fresnel reflectance and eta / k; and the plugin's
+twist) are differentiable in mi.traverse; the others (a grating's, hurst,
+a measured metal) are not. For each, the
 gradient of a rendered image's mean (Mitsuba's `prb` integrator, reverse
 mode) is compared with the central finite difference of renders with the
 seed the gradient pass draws its samples with (a point light, paths of one
@@ -96,6 +98,12 @@ def check_gradient(bsdf, key, step):
                    'corr_y_um': 1.0}, 0.02),
     ('twist', {'surface': 'gaussian', 'sigma_um': 0.1, 'corr_x_um': 1.0,
                'corr_y_um': 3.0, 'twist': 25.0}, 2.0),
+    ('fresnel', {'surface': 'gaussian', 'sigma_um': 0.12, 'corr_um': 1.5, 'fresnel': 0.7}, 0.01),
+    ('eta', {'surface': 'gaussian', 'sigma_um': 0.12, 'corr_um': 1.5, 'eta': 1.5, 'k': 3.0},
+     0.02),
+    ('k', {'surface': 'gaussian', 'sigma_um': 0.12, 'corr_um': 1.5, 'eta': 1.5, 'k': 3.0}, 0.04),
+    ('sigma_um', {'surface': 'fractal', 'sigma_um': 0.1, 'hurst': 0.7, 'lag_um': 1.0}, 0.003),
+    ('lag_um', {'surface': 'fractal', 'sigma_um': 0.1, 'hurst': 0.7, 'lag_um': 1.0}, 0.03),
 ])
 def test_gradient_equals_finite_difference(variant, key, bsdf, step):
     stam_mitsuba.setup(variant)

@@ -503,6 +503,12 @@ def test_plausible_materials_log_nothing(log):
 # mi.traverse: transactional updates, string parameters
 # ---------------------------------------------------------------------------
 
+def number(v):
+    """A traversed number: a float (scalar variants) or a one-value Float
+    (JIT variants, as Mitsuba's own BSDFs expose theirs)."""
+    return float(v[0]) if hasattr(v, '__len__') else float(v)
+
+
 def refused(params, match):
     with pytest.raises(Exception) as e:
         params.update()
@@ -518,14 +524,15 @@ def test_refused_update_leaves_the_material_as_it_was(variant):
     params = mi.traverse(b)
     params['sigma_um'] = -1.0
     refused(params, 'sigma_um')
-    assert params['sigma_um'] == pytest.approx(0.1)
+    assert number(params['sigma_um']) == pytest.approx(0.1)
     assert str(b) == text
     assert np.array_equal(eval_at(b), before)
     # Two changes, one bad: neither is taken
     params['corr_um'] = 3.0
     params['twist'] = 1e9
     refused(params, 'twist')
-    assert params['corr_um'] == pytest.approx(2.0) and params['twist'] == pytest.approx(10.0)
+    assert number(params['corr_um']) == pytest.approx(2.0)
+    assert number(params['twist']) == pytest.approx(10.0)
     assert str(b) == text and np.array_equal(eval_at(b), before)
     # Later updates work
     params['sigma_um'] = 0.2
