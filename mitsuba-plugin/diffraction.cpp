@@ -24,6 +24,7 @@
 #include <mitsuba/render/bsdf.h>
 #include <mitsuba/render/interaction.h>
 #include <mitsuba/render/shape.h>
+#include <mitsuba/render/texture.h>
 
 #include <cmath>
 #include <cstdio>
@@ -150,11 +151,11 @@ Diffraction BSDF (:monosp:`diffraction`)
      fractal surfaces)
    - |exposed|
  * - twist
-   - |float|
+   - |float| or |texture|
    - Rotation of the tangent frame (the tracks' periodic direction, the
-     brushing direction) about the normal, in degrees, in [-360, 360].
-     (Default: 0)
-   - |exposed|
+     brushing direction) about the normal, in degrees, in [-360, 360]; a
+     texture (a twist map) turns it point by point. (Default: 0)
+   - |exposed|, |differentiable|
  * - tracks
    - |string|
    - How the tangent frame follows the shape. ``linear``: straight tracks
@@ -262,11 +263,12 @@ wavelengths' densities, as above).
 using diffraction_detail::Batch;
 using diffraction_detail::BatchIO;
 using diffraction_detail::CorePtr;
-using diffraction_detail::excerpt;
 using diffraction_detail::json_escape;
 using diffraction_detail::build_json;
 using diffraction_detail::check_frame_params;
 using diffraction_detail::describe;
+using diffraction_detail::lines_of;
+using diffraction_detail::tracks_are_linear;
 using diffraction_detail::json_number;
 using diffraction_detail::number_text;
 using diffraction_detail::set_text;
@@ -274,6 +276,7 @@ using diffraction_detail::JitPath;
 using diffraction_detail::param_id;
 using diffraction_detail::scalar_of;
 using diffraction_detail::shape_kind;
+using diffraction_detail::mesh_without_uv_message;
 using diffraction_detail::track_direction;
 using diffraction_detail::UvShape;
 using diffraction_detail::PolarDisk;
@@ -288,7 +291,7 @@ template <typename Float, typename Spectrum>
 class Diffraction final : public BSDF<Float, Spectrum> {
 public:
     MI_IMPORT_BASE(BSDF, m_flags, m_components)
-    MI_IMPORT_TYPES(Shape)
+    MI_IMPORT_TYPES(Shape, Texture)
 
     enum class Tracks { Linear, Concentric };
 
@@ -322,7 +325,10 @@ public:
                 using PType = Properties::Type;
                 PType type = it->type();
 
-                if (name == "twist") {
+                if (name == "twist" && type == PType::Object) {
+                    // A twist map (degrees; any texture, unbounded)
+                    m_twist_texture = props.get_unbounded_texture<Texture>("twist");
+                } else if (name == "twist") {
                     m_twist = (ScalarFloat) it->template get<double>();
                     m_twist_diff = Float(m_twist);
                 } else if (name == "tracks") {
@@ -357,10 +363,13 @@ public:
                     p.kind = Param::Bool;
                     p.text = it->template get<bool>() ? "true" : "false";
                     m_params.push_back(p);
+                } else if (type == PType::Object) {
+                    throw ParamError("parameter '" + name + "' cannot take a texture (of the "
+                                     "material's parameters only 'twist' can, for now)");
                 } else {
                     throw ParamError("parameter '" + name + "' has type " +
                                      std::string(property_type_name(type)) +
-                                     "; only numbers and strings are accepted (no textures)");
+                                     "; only numbers and strings are accepted");
                 }
             }
             if (has_center && m_tracks != Tracks::Concentric)
@@ -387,7 +396,7 @@ public:
         // Flags and components, declared once
         m_has_coherent = (m_core_flags & STAM_FLAG_HAS_COHERENT) != 0;
         uint32_t glossy = +BSDFFlags::GlossyReflection | +BSDFFlags::FrontSide;
-        if ((m_core_flags & STAM_FLAG_ANISOTROPIC) || m_twist != 0.f ||
+        if ((m_core_flags & STAM_FLAG_ANISOTROPIC) || m_twist != 0.f || m_twist_texture ||
             m_tracks == Tracks::Concentric)
             glossy |= +BSDFFlags::Anisotropic;
         m_components.clear();
@@ -412,7 +421,9 @@ public:
             else if (p.kind == Param::String || p.kind == Param::Json)
                 cb->put(p.name, p.holder, ParamFlags::NonDifferentiable);
         }
-        if constexpr (dr::is_jit_v<Float>)
+        if (m_twist_texture)
+            cb->put("twist", m_twist_texture, ParamFlags::Differentiable);
+        else if constexpr (dr::is_jit_v<Float>)
             cb->put("twist", m_twist_diff,
                     (m_components[0] & +BSDFFlags::Anisotropic) ? ParamFlags::Differentiable
                                                                 : ParamFlags::NonDifferentiable);
@@ -463,7 +474,7 @@ public:
         }
         m_saved = snapshot();
         // Anisotropy is a hint to integrators: follow the core and the frame
-        if ((m_core_flags & STAM_FLAG_ANISOTROPIC) || m_twist != 0.f ||
+        if ((m_core_flags & STAM_FLAG_ANISOTROPIC) || m_twist != 0.f || m_twist_texture ||
             m_tracks == Tracks::Concentric) {
             m_components[0] |= +BSDFFlags::Anisotropic;
             m_flags |= +BSDFFlags::Anisotropic;
@@ -520,8 +531,12 @@ public:
         std::ostringstream oss;
         oss << "Diffraction[" << std::endl;
         describe(oss, m_params);
-        oss << "  twist = " << m_twist << "," << std::endl
-            << "  tracks = " << tracks_name(m_tracks);
+        oss << "  twist = ";
+        if (m_twist_texture)
+            oss << string::indent(m_twist_texture) << "," << std::endl;
+        else
+            oss << m_twist << "," << std::endl;
+        oss << "  tracks = " << tracks_name(m_tracks);
         if (m_tracks == Tracks::Concentric)
             oss << "," << std::endl
                 << "  center_u = " << m_center_u << "," << std::endl
@@ -571,13 +586,7 @@ private:
     }
 
     void set_tracks(const std::string &t) {
-        if (t == "linear")
-            m_tracks = Tracks::Linear;
-        else if (t == "concentric")
-            m_tracks = Tracks::Concentric;
-        else
-            throw ParamError("parameter 'tracks' = \"" + excerpt(t) +
-                             "\": must be \"linear\" or \"concentric\"");
+        m_tracks = tracks_are_linear(t) ? Tracks::Linear : Tracks::Concentric;
         m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
     }
 
@@ -661,7 +670,13 @@ private:
 
     /// The twist's rotation (cos, sin): differentiable in JIT variants where
     /// the twist carries a gradient
-    std::pair<Float, Float> twist_rotation() const {
+    std::pair<Float, Float> twist_rotation(const SurfaceInteraction3f &si, Mask active) const {
+        if (m_twist_texture) {
+            // The twist map's value at the point, in degrees
+            auto [s, c] = dr::sincos(m_twist_texture->eval_1(si, active) *
+                                     (dr::Pi<ScalarFloat> / 180.f));
+            return { c, s };
+        }
         if constexpr (dr::is_jit_v<Float>) {
             // From memory (no kernel per value), differentiable
             auto [s, c] = dr::sincos(m_twist_diff * (dr::Pi<ScalarFloat> / 180.f));
@@ -730,14 +745,8 @@ private:
         if (m_pending_warnings == m_warnings)
             return;
         m_warnings = m_pending_warnings;
-        size_t pos = 0;
-        while (pos < m_warnings.size()) {
-            size_t nl = m_warnings.find('\n', pos);
-            if (nl == std::string::npos)
-                nl = m_warnings.size();
-            Log(Warn, "diffraction: %s", m_warnings.substr(pos, nl - pos));
-            pos = nl + 1;
-        }
+        for (const std::string &line : lines_of(m_warnings))
+            Log(Warn, "diffraction: %s", line);
     }
 
     /// How the shape of each lane defines the tracks. Throws for a mesh
@@ -777,12 +786,7 @@ private:
     }
 
     [[noreturn]] void throw_mesh_without_uv(const std::string &mesh) const {
-        Throw("diffraction: tracks = \"%s\" on a mesh without texture coordinates%s: "
-              "the tracks' direction is defined through the uv parametrisation "
-              "(linear tracks follow dp/du, concentric ones circle a uv centre), "
-              "which such a mesh lacks (Mitsuba gives each triangle its own). Give "
-              "the mesh uv coordinates, or use a disk or rectangle shape.",
-              tracks_name(m_tracks), mesh.empty() ? "" : " (\"" + mesh + "\")");
+        Throw("diffraction: %s", mesh_without_uv_message(tracks_name(m_tracks), mesh));
     }
 
     /// JIT variants, recorded code: throws when a registered shape that
@@ -811,7 +815,7 @@ private:
         UInt32 kind = shape_kinds(si, active);
         Mask disk = kind == (uint32_t) PolarDisk;
         const bool linear = m_tracks == Tracks::Linear;
-        auto [cos_t, sin_t] = twist_rotation();
+        auto [cos_t, sin_t] = twist_rotation(si, active);
         if (linear && dr::none_or<false>(disk && active))
             return { cos_t, sin_t };
 
@@ -961,6 +965,7 @@ private:
 
     std::vector<Param> m_params;
     ScalarFloat m_twist = 0.f;
+    ref<Texture> m_twist_texture;           // a twist map (then m_twist is 0)
     Float m_twist_diff = 0.f;               // JIT variants: `twist` through mi.traverse
     Tracks m_tracks = Tracks::Linear;
     Properties m_tracks_holder{ "linear" }; // `tracks` through mi.traverse

@@ -7,6 +7,7 @@
 
 #include <mitsuba/core/properties.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <ostream>
@@ -138,6 +139,25 @@ inline void check_frame_params(double twist, double center_u, double center_v) {
                          " is out of range: accepted [-360, 360] degrees");
     if (!std::isfinite(center_u) || !std::isfinite(center_v))
         throw ParamError("parameters 'center_u' and 'center_v' must be finite");
+}
+
+/// `tracks`: true for "linear", false for "concentric"; ParamError else
+inline bool tracks_are_linear(const std::string &t) {
+    if (t != "linear" && t != "concentric")
+        throw ParamError("parameter 'tracks' = \"" + excerpt(t) +
+                         "\": must be \"linear\" or \"concentric\"");
+    return t == "linear";
+}
+
+/// The lines of a text (no trailing newline expected)
+inline std::vector<std::string> lines_of(const std::string &text) {
+    std::vector<std::string> out;
+    for (size_t pos = 0; pos < text.size();) {
+        size_t nl = std::min(text.find('\n', pos), text.size());
+        out.push_back(text.substr(pos, nl - pos));
+        pos = nl + 1;
+    }
+    return out;
 }
 
 NAMESPACE_END(diffraction_detail)

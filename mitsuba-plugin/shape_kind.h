@@ -7,6 +7,7 @@
 
 #include <mitsuba/render/shape.h>
 
+#include <string>
 #include <string_view>
 #include <type_traits>
 #include <utility>
@@ -57,6 +58,17 @@ uint32_t shape_kind(const Shape<Float, Spectrum> *shape) {
             return MeshWithoutUv;
     }
     return UvShape;
+}
+
+/// Why a material with tracks cannot render on a mesh without texture
+/// coordinates (`mesh`: its id, may be empty)
+inline std::string mesh_without_uv_message(const char *tracks, const std::string &mesh) {
+    return std::string("tracks = \"") + tracks + "\" on a mesh without texture coordinates" +
+           (mesh.empty() ? "" : " (\"" + mesh + "\")") +
+           ": the tracks' direction is defined through the uv parametrisation (linear "
+           "tracks follow dp/du, concentric ones circle a uv centre), which such a mesh "
+           "lacks (Mitsuba gives each triangle its own). Give the mesh uv coordinates, or "
+           "use a disk or rectangle shape.";
 }
 
 /// The direction (c, s) of the tracks in the local (xy) plane before the
