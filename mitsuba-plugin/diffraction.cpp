@@ -989,7 +989,7 @@ private:
     std::vector<float> m_built;
     /// An update moving a parameter the programs read by at most this
     /// (relative) keeps the programs (update_without_rebuild): their error
-    /// against the rebuilt material stays below 1e-4, 6e-4 for the RGB
+    /// against the rebuilt material stays below 1e-4, 1.1e-3 for the RGB
     /// table of isotropic metals (docs/jit.md, "Parameters")
     static constexpr ScalarFloat MaxDriftWithoutRebuild = 0.02f;
 

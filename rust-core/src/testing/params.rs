@@ -4,7 +4,7 @@
 //! program and its native path), the program's derivative with respect to
 //! the parameter (what a renderer's AD sees) is the native path's, and the
 //! program is smooth along a fine sweep of the parameter.
-//! (models/gaussian/param_tests.rs has the Gaussian model's own versions.)
+//! (Used by every model's param_tests.rs and optics/param_tests.rs.)
 
 use super::programs::{exported, pairs, round};
 use crate::material::program::ProgramKind;
