@@ -197,18 +197,13 @@ fn rgb_matches_native() {
 const RGB_DOCUMENTED: f64 = 3.1e-3;
 const RGB_TOLERANCE: f64 = 5e-3;
 
-/// Pairs on the orders' rainbows (u = n lambda / Lam for a random lambda of
-/// the band, v within a peak width) and near the mirror direction, where
-/// the RGB value is large: errors relative to each pair's largest channel.
-fn rgb_peak_errors(brdf: &Brdf, seed: u64) -> (f64, f64, usize) {
-    let crate::models::Surface::Periodic(m) = brdf.surface() else {
-        unreachable!()
-    };
-    let (period, l) = (m.surface().period_um(), m.surface().coherence_um());
-    let program = exported(brdf, ProgramKind::EvalRgb).unwrap();
+/// 2000 f32 pairs on the orders' rainbows (u = n lambda / Lam for a random
+/// lambda of the band, v within a peak width; a fifth on order 0, four
+/// peak widths around the mirror direction), where the RGB value is large.
+fn rgb_peak_pairs(period: f64, l: f64, seed: u64) -> Vec<(DVec3, DVec3)> {
     let mut rng = crate::benchmark::SplitMix64(seed);
-    let mut rows = Vec::new();
-    while rows.len() < 2000 {
+    let mut pairs = Vec::new();
+    while pairs.len() < 2000 {
         let [a, b2, c] = rng.three();
         let wi = DVec3::new(1.8 * b2 - 0.9, 0.4 * c - 0.2, 0.0);
         if wi.length_squared() > 0.995 {
@@ -233,9 +228,27 @@ fn rgb_peak_errors(brdf: &Brdf, seed: u64) -> (f64, f64, usize) {
         }
         let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
         let (wi, wo) = (round(wi), round(wo));
-        let native = brdf.eval_rgb(wi, wo);
-        rows.push((wi, wo, native, native[0].max(native[1]).max(native[2])));
+        pairs.push((wi, wo));
     }
+    pairs
+}
+
+/// Pairs on the orders' rainbows (u = n lambda / Lam for a random lambda of
+/// the band, v within a peak width) and near the mirror direction, where
+/// the RGB value is large: errors relative to each pair's largest channel.
+fn rgb_peak_errors(brdf: &Brdf, seed: u64) -> (f64, f64, usize) {
+    let crate::models::Surface::Periodic(m) = brdf.surface() else {
+        unreachable!()
+    };
+    let (period, l) = (m.surface().period_um(), m.surface().coherence_um());
+    let program = exported(brdf, ProgramKind::EvalRgb).unwrap();
+    let rows: Vec<_> = rgb_peak_pairs(period, l, seed)
+        .into_iter()
+        .map(|(wi, wo)| {
+            let native = brdf.eval_rgb(wi, wo);
+            (wi, wo, native, native[0].max(native[1]).max(native[2]))
+        })
+        .collect();
     let peak = rows.iter().map(|r| r.3).fold(0.0, f64::max);
     let (mut e32, mut e64, mut checked) = (0.0f64, 0.0f64, 0);
     for (wi, wo, native, scale) in rows {
@@ -289,38 +302,15 @@ fn rgb_pre_gamut_errors(brdf: &Brdf, seed: u64) -> (f64, usize) {
         .unwrap();
     let program = b.finish(&rgb);
     let (period, l) = (m.surface().period_um(), m.surface().coherence_um());
-    let mut rng = crate::benchmark::SplitMix64(seed);
-    let mut rows = Vec::new();
-    while rows.len() < 2000 {
-        let [a, b2, c] = rng.three();
-        let wi = DVec3::new(1.8 * b2 - 0.9, 0.4 * c - 0.2, 0.0);
-        if wi.length_squared() > 0.995 {
-            continue;
-        }
-        let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
-        let [d, e, f] = rng.three();
-        let lambda = 380.0 + 400.0 * a;
-        let k = 2000.0 * PI / lambda;
-        let n_max = (2.0 * period * 1000.0 / lambda) as i64;
-        let n = if d < 0.2 {
-            0.0
-        } else {
-            ((2.0 * d - 1.0) * n_max as f64).round()
-        };
-        let spread = if n == 0.0 { 4.0 } else { 1.0 };
-        let u = n * lambda / (1000.0 * period) + spread * (2.0 * e - 1.0) / (l * k);
-        let v = spread * (2.0 * f - 1.0) / (l * k);
-        let (x, y) = (-wi.x - u, -wi.y - v);
-        if x * x + y * y > 0.999 {
-            continue;
-        }
-        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
-        let (wi, wo) = (round(wi), round(wo));
-        let g = PairGeometry::new(wi, wo).unwrap();
-        let native = m.reflectance_rgb(&shading, &g);
-        let scale = native.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        rows.push((wi, wo, native, scale));
-    }
+    let rows: Vec<_> = rgb_peak_pairs(period, l, seed)
+        .into_iter()
+        .map(|(wi, wo)| {
+            let g = PairGeometry::new(wi, wo).unwrap();
+            let native = m.reflectance_rgb(&shading, &g);
+            let scale = native.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            (wi, wo, native, scale)
+        })
+        .collect();
     let peak = rows.iter().map(|r| r.3).fold(0.0, f64::max);
     let (mut worst, mut checked) = (0.0f64, 0);
     for (wi, wo, native, scale) in rows {
