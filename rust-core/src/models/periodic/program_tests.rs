@@ -405,11 +405,16 @@ fn program_fits(label: &str, brdf: &Brdf, modes: &[Option<f64>], n: usize) {
     assert!(failures.is_empty(), "{label}: {failures:?}");
 }
 
+// One test per material, so that the harness runs them side by side.
 #[test]
-fn chi2_sampling_programs() {
+fn chi2_sampling_programs_cd() {
     let short_cd =
         Brdf::from_json(r#"{"surface": "cd", "coherence_um": 4, "fresnel": 0.9}"#).unwrap();
     program_fits("cd l=4", &short_cd, &[Some(550.0), None], 100_000);
+}
+
+#[test]
+fn chi2_sampling_programs_sine() {
     let sine = Brdf::from_json(
         r#"{"surface":"periodic","period_um":1.6,"coherence_um":8,"profile":"sine","height_um":0.3,"fresnel":{"eta":1.5,"k":6}}"#,
     )
