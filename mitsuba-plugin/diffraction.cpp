@@ -39,6 +39,7 @@
 #include "params_json.h"
 #include "plugin_params.h"
 #include "shape_kind.h"
+#include "sigma_texture.h"
 
 NAMESPACE_BEGIN(mitsuba)
 
@@ -58,10 +59,11 @@ Diffraction BSDF (:monosp:`diffraction`)
      (Default: none, required)
    - |exposed| (as a string, see below)
  * - sigma_um
-   - |float|
-   - Gaussian surfaces: rms height; fractal surfaces: rms height difference
-     over ``lag_um``. Micrometres, in [1e-6, 100]. (Default: none, required)
-   - |exposed|
+   - |float| or |texture|
+   - Gaussian surfaces: rms height (JIT variants: also a texture, point by point,
+     up to its largest value or ``sigma_um_max``); fractal surfaces: rms height
+     difference over ``lag_um``. Micrometres, in [1e-6, 100]. (Default: none, required)
+   - |exposed|, |differentiable|
  * - corr_um
    - |float|
    - Gaussian surfaces: isotropic correlation length T. Micrometres, in
@@ -76,8 +78,7 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed|
  * - hurst
    - |float|
-   - Fractal surfaces: Hurst exponent H (dimensionless), in [0.001, 1].
-     (Default: none, required)
+   - Fractal surfaces: Hurst exponent H (dimensionless), in [0.001, 1]. (Default: none, required)
    - |exposed|
  * - lag_um
    - |float|
@@ -278,6 +279,9 @@ using diffraction_detail::scalar_of;
 using diffraction_detail::shape_kind;
 using diffraction_detail::mesh_without_uv_message;
 using diffraction_detail::track_direction;
+using diffraction_detail::to_core;
+using diffraction_detail::from_core;
+using diffraction_detail::registered_mesh_without_uv;
 using diffraction_detail::UvShape;
 using diffraction_detail::PolarDisk;
 using diffraction_detail::MeshWithoutUv;
@@ -316,7 +320,7 @@ public:
         size_t count = 0;
         for (auto it = props.begin(); it != props.end(); ++it)
             ++count;
-        m_params.reserve(count); // never reallocated: traverse() hands out pointers
+        m_params.reserve(count + 2); // never reallocated: traverse() hands out pointers
 
         try {
             bool has_center = false;
@@ -328,6 +332,8 @@ public:
                 if (name == "twist" && type == PType::Object) {
                     // A twist map (degrees; any texture, unbounded)
                     m_twist_texture = props.get_unbounded_texture<Texture>("twist");
+                } else if (name == "sigma_um" && type == PType::Object) {
+                    m_sigma.texture = props.get_unbounded_texture<Texture>("sigma_um");
                 } else if (name == "twist") {
                     m_twist = (ScalarFloat) it->template get<double>();
                     m_twist_diff = Float(m_twist);
@@ -365,7 +371,7 @@ public:
                     m_params.push_back(p);
                 } else if (type == PType::Object) {
                     throw ParamError("parameter '" + name + "' cannot take a texture (of the "
-                                     "material's parameters only 'twist' can, for now)");
+                                     "material's parameters only 'twist' and 'sigma_um' can)");
                 } else {
                     throw ParamError("parameter '" + name + "' has type " +
                                      std::string(property_type_name(type)) +
@@ -387,6 +393,8 @@ public:
                 throw ParamError("parameter 'k' needs 'eta' (the complex index eta + i k; "
                                  "eta in [0.001, 100])");
 
+            if (m_sigma)
+                m_sigma.attach(m_params);
             check_frame();
             commit(build_core());
         } catch (const ParamError &e) {
@@ -413,6 +421,8 @@ public:
     void traverse(TraversalCallback *cb) override {
         Base::traverse(cb);
         for (Param &p : m_params) {
+            if (p.from_texture)
+                continue;
             if (p.kind == Param::Number && dr::is_jit_v<Float>)
                 cb->put(p.name, p.diff, reads(p.id) ? ParamFlags::Differentiable
                                                     : ParamFlags::NonDifferentiable);
@@ -421,6 +431,8 @@ public:
             else if (p.kind == Param::String || p.kind == Param::Json)
                 cb->put(p.name, p.holder, ParamFlags::NonDifferentiable);
         }
+        if (m_sigma)
+            cb->put("sigma_um", m_sigma.texture, ParamFlags::Differentiable);
         if (m_twist_texture)
             cb->put("twist", m_twist_texture, ParamFlags::Differentiable);
         else if constexpr (dr::is_jit_v<Float>)
@@ -632,8 +644,8 @@ private:
             if (keys.empty())
                 return false;
             for (const std::string &k : keys) {
-                if (k == "twist")
-                    continue;
+                if (k == "twist" || (k == "sigma_um" && m_sigma))
+                    continue; // read per point, or from memory
                 auto it = std::find_if(m_params.begin(), m_params.end(),
                                        [&](const Param &p) { return p.name == k; });
                 if (it == m_params.end() || it->kind != Param::Number || it->id < 0 ||
@@ -789,20 +801,12 @@ private:
         Throw("diffraction: %s", mesh_without_uv_message(tracks_name(m_tracks), mesh));
     }
 
-    /// JIT variants, recorded code: throws when a registered shape that
-    /// carries this material is a mesh without texture coordinates (the
-    /// evaluated mode's per-lane test, done for every such shape while the
-    /// code is recorded, since it cannot look at the lanes).
+    /// JIT variants, recorded code: throws for a registered mesh without
+    /// texture coordinates that carries this material
     void check_registered_meshes() const {
-        if constexpr (dr::is_jit_v<Float>) {
-            const char *variant = Shape::Variant, *domain = Shape::Domain;
-            uint32_t bound = jit_registry_id_bound(variant, domain);
-            for (uint32_t id = 1; id <= bound; ++id) {
-                auto *shape = (const Shape *) jit_registry_ptr(variant, domain, id);
-                if (shape && shape->bsdf() == this && shape_kind(shape) == MeshWithoutUv)
-                    throw_mesh_without_uv(std::string(shape->id()));
-            }
-        }
+        std::string mesh = registered_mesh_without_uv<Shape>(this);
+        if (!mesh.empty())
+            throw_mesh_without_uv(mesh);
     }
 
     /// Rotation (c, s) of the core's tangent (the periodic direction of
@@ -821,13 +825,6 @@ private:
 
         auto [c0, s0] = track_direction(si, disk, linear, m_center_u, m_center_v);
         return { c0 * cos_t - s0 * sin_t, s0 * cos_t + c0 * sin_t };
-    }
-
-    static Vector3f to_core(const Vector3f &w, const Float &c, const Float &s) {
-        return { c * w.x() + s * w.y(), -s * w.x() + c * w.y(), w.z() };
-    }
-    static Vector3f from_core(const Vector3f &v, const Float &c, const Float &s) {
-        return { c * v.x() - s * v.y(), s * v.x() + c * v.y(), v.z() };
     }
 
     /// What a query asks and where: the lobes, the active lanes (eval: wi
@@ -935,7 +932,9 @@ private:
                    const Float *sample1, const Point2f *sample2, bool want_value,
                    bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
-        const Float &params = m_param_array;
+        typename Jit::Params params{ m_param_array, {} };
+        if (m_sigma)
+            params.per_point[STAM_PARAM_SIGMA_UM] = m_sigma.at(si, st.active_e || st.active_s);
         if (st.do_eval) {
             if (want_value)
                 q.value = dr::select(st.active_e,
@@ -966,6 +965,7 @@ private:
     std::vector<Param> m_params;
     ScalarFloat m_twist = 0.f;
     ref<Texture> m_twist_texture;           // a twist map (then m_twist is 0)
+    diffraction_detail::SigmaTexture<Float, Spectrum> m_sigma; // a sigma map (JIT variants)
     Float m_twist_diff = 0.f;               // JIT variants: `twist` through mi.traverse
     Tracks m_tracks = Tracks::Linear;
     Properties m_tracks_holder{ "linear" }; // `tracks` through mi.traverse

@@ -33,9 +33,9 @@ public:
     MI_IMPORT_TYPES()
     using Prog = program::Program<Float>;
     using FloatStorage = DynamicBuffer<Float>;
-    /// Values of the material's parameters by STAM_PARAM_* id (STAM_PARAMS
-    /// values; width 0: the programs' own values), program.h's Program::run
-    using Params = Float;
+    /// Values of the material's parameters (program.h's ParamInputs: by
+    /// STAM_PARAM_* id, and per point where a texture gives one)
+    using Params = program::ParamInputs<Float>;
 
     static constexpr bool IsSpectral = is_spectral_v<Spectrum>;
     static constexpr bool IsMono = is_monochromatic_v<Spectrum>;

@@ -32,6 +32,7 @@ template <typename Float> struct PluginParam {
     /// where the material's programs read it (STAM_PARAM_* `id`)
     Float diff = 0.f;
     int id = -1;
+    bool from_texture = false; // set from a texture (sigma_texture.h), not traversed
     std::string text;   // string value, or raw JSON
     std::string source; // String, Json: the user's string
     /// String, Json: the user's string as the plugin name of a Properties,
@@ -122,7 +123,9 @@ template <typename Float>
 void describe(std::ostream &os, const std::vector<PluginParam<Float>> &params) {
     for (const PluginParam<Float> &p : params) {
         os << "  " << p.name << " = ";
-        if (p.kind == PluginParam<Float>::Number)
+        if (p.from_texture)
+            os << number_text(p) << " (from the texture)";
+        else if (p.kind == PluginParam<Float>::Number)
             os << number_text(p);
         else if (p.kind == PluginParam<Float>::String)
             os << json_escape(p.text);

@@ -265,6 +265,14 @@ private:
 /// array; AD arrays differentiate through it). Its tables live in a buffer
 /// the caller holds (several programs share one, so that a material has a
 /// single device array to load and to traverse for dr.freeze).
+/// The values of the parameters a program reads (`Op::Param`): `array`,
+/// STAM_PARAMS values by STAM_PARAM_* id (width 0: the program's own
+/// values); `per_point[id]`, where not empty, that parameter per lane.
+template <typename Float> struct ParamInputs {
+    Float array;
+    Float per_point[STAM_PARAMS];
+};
+
 template <typename Float> class Program {
 public:
     using Mask = dr::mask_t<Float>;
@@ -293,13 +301,15 @@ public:
 
     /// The outputs for `inputs` (n_inputs arrays), one Dr.Jit operation per
     /// instruction; `tables` is the buffer the constructor's storage was
-    /// loaded into. `params` (STAM_PARAMS values, indexed by STAM_PARAM_*
-    /// id) gives the values of the parameters the program reads (read from
-    /// memory: changing them changes no kernel; gradients flow back into
-    /// them); width 0: the program's own values, as constants.
+    /// loaded into. `params.array` (STAM_PARAMS values, indexed by
+    /// STAM_PARAM_* id) gives the values of the parameters the program reads
+    /// (read from memory: changing them changes no kernel; gradients flow
+    /// back into them); width 0: the program's own values, as constants.
+    /// `params.per_point[id]`, where not empty, gives that parameter's value
+    /// per lane instead (a texture's).
     template <typename Storage>
     std::vector<Float> run(const std::vector<Float> &inputs, const Storage &tables,
-                           const Float &params = Float()) const {
+                           const ParamInputs<Float> &params = {}) const {
         if (inputs.size() != m_code.n_inputs)
             throw std::runtime_error("program: " + std::to_string(inputs.size()) +
                                      " inputs given, it takes " +
@@ -340,11 +350,16 @@ public:
                 case Op::Not: m[i] = !m[in.a]; break;
                 case Op::Select: f[i] = dr::select(m[in.a], fb, fc); break;
                 case Op::Gather: f[i] = gather(in.a, fb, tables); break;
-                case Op::Param:
-                    f[i] = dr::width(params) == STAM_PARAMS
-                               ? dr::gather<Float>(params, UInt32(m_code.param_id[in.a]))
-                               : Float(m_code.param_value[in.a]);
+                case Op::Param: {
+                    uint32_t id = m_code.param_id[in.a];
+                    if (dr::width(params.per_point[id]) != 0)
+                        f[i] = params.per_point[id];
+                    else if (dr::width(params.array) == STAM_PARAMS)
+                        f[i] = dr::gather<Float>(params.array, UInt32(id));
+                    else
+                        f[i] = Float(m_code.param_value[in.a]);
                     break;
+                }
             }
             for (uint32_t r : m_code.last_use[i]) {
                 f[r] = Float();

@@ -114,5 +114,30 @@ auto track_direction(const SurfaceInteraction &si, const Mask &disk, bool linear
     return std::make_pair(c0, s0);
 }
 
+/// A vector in the core's frame, whose x axis is (c, s, 0) of the local
+/// frame, and back.
+template <typename Vector3f, typename Float>
+Vector3f to_core(const Vector3f &w, const Float &c, const Float &s) {
+    return { c * w.x() + s * w.y(), -s * w.x() + c * w.y(), w.z() };
+}
+template <typename Vector3f, typename Float>
+Vector3f from_core(const Vector3f &v, const Float &c, const Float &s) {
+    return { c * v.x() - s * v.y(), s * v.x() + c * v.y(), v.z() };
+}
+
+/// JIT variants: the id of a registered shape that carries `bsdf` and is a
+/// mesh without texture coordinates ("" for none): recorded code cannot look
+/// at its lanes, so every such shape is checked while it is recorded.
+template <typename Shape, typename BSDF> std::string registered_mesh_without_uv(const BSDF *bsdf) {
+    const char *variant = Shape::Variant, *domain = Shape::Domain;
+    uint32_t bound = jit_registry_id_bound(variant, domain);
+    for (uint32_t id = 1; id <= bound; ++id) {
+        auto *shape = (const Shape *) jit_registry_ptr(variant, domain, id);
+        if (shape && shape->bsdf() == bsdf && shape_kind(shape) == MeshWithoutUv)
+            return std::string(shape->id());
+    }
+    return "";
+}
+
 NAMESPACE_END(diffraction_detail)
 NAMESPACE_END(mitsuba)

@@ -1,9 +1,13 @@
-"""Texturable parameters of the `diffraction` BSDF (issue 14): a twist map.
+"""Texturable parameters of the `diffraction` BSDF (issue 14): a twist map
+and a sigma map.
 
 `twist` takes any Mitsuba texture (degrees, unbounded): the tracks turn by
-the texture's value at each point, in every variant. Other parameters refuse
-a texture with a message naming them. In the AD variants the texture's
-values are differentiable (mi.traverse: twist.<its parameters>).
+the texture's value at each point, in every variant. `sigma_um` of a Gaussian
+surface takes one in the JIT variants (the programs read sigma per point,
+built for every sigma up to the texture's largest value). Other parameters
+refuse a texture with a message naming them. In the AD variants the
+texture's values are differentiable (mi.traverse: twist.<its parameters>,
+sigma_um.<its parameters>).
 
 Run: make core plugin && .venv/bin/python -m pytest tests/test_textures.py
 """
@@ -70,8 +74,8 @@ def test_twist_map_turns_the_tracks_point_by_point(variant):
 def test_a_texture_elsewhere_is_refused_by_name(variant):
     mi = stam_mitsuba.setup(variant)
     with pytest.raises(Exception) as e:
-        mi.load_dict({**BRUSHED, 'sigma_um': {'type': 'uniform', 'value': 0.1}})
-    assert "'sigma_um' cannot take a texture" in str(e.value), str(e.value)
+        mi.load_dict({**BRUSHED, 'corr_x_um': {'type': 'uniform', 'value': 0.1}})
+    assert "'corr_x_um' cannot take a texture" in str(e.value), str(e.value)
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
@@ -93,6 +97,127 @@ def test_twist_map_values_are_differentiable(variant):
         values.append(tg.mean_of(scene))
     fd = (values[0] - values[1]) / (2 * h)
     v = mi.Float(25.0)
+    dr.enable_grad(v)
+    params[key] = v
+    params.update()
+    img = mi.render(scene, params=params, seed=1, seed_grad=tg.SEED, spp=16)
+    dr.backward(dr.mean(img, axis=None))
+    ad = float(dr.grad(v)[0])
+    assert abs(fd) > 1e-4 * max(values)
+    assert abs(ad - fd) <= tg.GRADIENT_TOL * abs(fd), (ad, fd)
+
+
+SMOOTH_TO_ROUGH = [[0.02, 0.3], [0.1, 0.5]]   # sigma_um per texel (um)
+
+
+def sigma_map(mi, values, **extra):
+    data = np.array(values, dtype=np.float32)[..., None]
+    return {'type': 'bitmap', 'bitmap': mi.Bitmap(data), 'raw': True,
+            'filter_type': 'nearest', **extra}
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+@pytest.mark.parametrize('fresnel', [0.9, 'gold'])
+def test_sigma_map_gives_each_point_its_sigma(variant, fresnel):
+    """A 2 x 2 sigma map from 0.02 to 0.5 um: at each texel the material is
+    the one with that sigma as a number (the programs are built for every
+    sigma up to 0.5; the sampling follows the point's sigma)."""
+    mi = stam_mitsuba.setup(variant)
+    base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': fresnel}
+    mapped = mi.load_dict({**base, 'sigma_um': sigma_map(mi, SMOOTH_TO_ROUGH)})
+    assert 'sigma_um_max = 0.5 (from the texture)' in str(mapped)
+    values = []
+    for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
+                           ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75))):
+        number = mi.load_dict({**base, 'sigma_um': SMOOTH_TO_ROUGH[row][col]})
+        got, want = eval_at(mi, mapped, uv), eval_at(mi, number, uv)
+        assert np.allclose(got, want, rtol=2e-4, atol=1e-7 * want.max()), (uv, got, want)
+        values.append(got)
+    assert not np.allclose(values[0], values[3], rtol=0.1)   # sigma matters here
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_sigma_map_samples_weigh_f_cos_over_pdf(variant):
+    """Samples at random points of the map: weight = f cos / pdf at the
+    sampled direction (glossy), each lane with its own sigma."""
+    mi = stam_mitsuba.setup(variant)
+    bsdf = mi.load_dict({'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0,
+                         'fresnel': 0.9, 'sigma_um': sigma_map(mi, SMOOTH_TO_ROUGH)})
+    n = 4096
+    rng = np.random.default_rng(3)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    cos_i = rng.uniform(0.1, 1.0, n)
+    si.wi = mi.Vector3f(np.sqrt(1 - cos_i ** 2), 0 * cos_i, cos_i)
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    si.uv = mi.Point2f(rng.uniform(0, 1, n), rng.uniform(0, 1, n))
+    if mi.is_spectral:
+        si.wavelengths = [450.0, 520.0, 590.0, 660.0]
+    ctx = mi.BSDFContext(mi.TransportMode.Radiance, mi.BSDFFlags.GlossyReflection)
+    bs, weight = bsdf.sample(ctx, si, mi.Float(rng.uniform(0, 1, n)),
+                             mi.Point2f(rng.uniform(0, 1, n), rng.uniform(0, 1, n)))
+    value, pdf = bsdf.eval_pdf(ctx, si, bs.wo)
+    w, v = np.array(weight), np.array(value)
+    p, sp = np.array(pdf), np.array(bs.pdf)
+    ok = sp > 0
+    assert ok.sum() > 1000   # (the rest chose the coherent lobe, which ctx excludes)
+    assert np.allclose(p[ok], sp[ok], rtol=1e-3)
+    assert np.allclose(w[..., ok] * sp[ok], v[..., ok], rtol=2e-3, atol=1e-6)
+    assert np.all(np.isfinite(w)) and np.all(w >= 0)
+
+
+def test_sigma_map_is_refused_where_it_cannot_go():
+    mi = stam_mitsuba.setup('scalar_rgb')
+    with pytest.raises(Exception) as e:
+        mi.load_dict({'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0,
+                      'sigma_um': {'type': 'uniform', 'value': 0.1}})
+    assert "'sigma_um' takes a texture only in the JIT variants" in str(e.value), str(e.value)
+    mi = stam_mitsuba.setup('llvm_ad_rgb')
+    with pytest.raises(Exception) as e:
+        mi.load_dict({'type': 'diffraction', 'surface': 'fractal', 'hurst': 0.7, 'lag_um': 2.0,
+                      'sigma_um': {'type': 'uniform', 'value': 0.1}})
+    assert 'only on surface "gaussian"' in str(e.value), str(e.value)
+    with pytest.raises(Exception) as e:
+        mi.load_dict({'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0,
+                      'sigma_um': sigma_map(mi, [[0.0, -0.2], [0.0, 0.0]])})
+    assert "'sigma_um': the texture's largest value" in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_sigma_map_bad_values_give_finite_results(variant):
+    """Negative, zero and NaN values read as the smoothest sigma (1e-6 um);
+    values above the given sigma_um_max as that maximum."""
+    mi = stam_mitsuba.setup(variant)
+    base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9}
+    bad = mi.load_dict({**base, 'sigma_um_max': 0.2,
+                        'sigma_um': sigma_map(mi, [[-0.3, 0.0], [float('nan'), 0.9]])})
+    for uv in ((0.25, 0.25), (0.75, 0.25), (0.25, 0.75)):
+        got = eval_at(mi, bad, uv)
+        assert np.all(np.isfinite(got)) and np.all(got >= 0), (uv, got)
+    capped = mi.load_dict({**base, 'sigma_um': 0.2})
+    assert np.allclose(eval_at(mi, bad, (0.75, 0.75)), eval_at(mi, capped, (0.75, 0.75)),
+                       rtol=2e-4)
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_sigma_map_values_are_differentiable(variant):
+    """d(mean of a render)/d(the map's value) against a central difference,
+    with the same samples (tests/test_gradients.py's method)."""
+    mi = stam_mitsuba.setup(variant)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import test_gradients as tg
+    bsdf = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9,
+            'sigma_um_max': 0.2, 'sigma_um': {'type': 'uniform', 'value': 0.1}}
+    scene = mi.load_dict(tg.scene_dict(bsdf))
+    params = mi.traverse(scene)
+    key = 'plate.bsdf.sigma_um.value'
+    assert key in params and params.flags(key) & mi.ParamFlags.NonDifferentiable.value == 0
+    h, values = 0.002, []
+    for x in (0.1 + h, 0.1 - h):
+        params[key] = mi.Float(x)
+        params.update()
+        values.append(tg.mean_of(scene))
+    fd = (values[0] - values[1]) / (2 * h)
+    v = mi.Float(0.1)
     dr.enable_grad(v)
     params[key] = v
     params.update()

@@ -60,6 +60,14 @@ impl MaterialParams {
                 )))
             }
         };
+        if let (EnergyMode::Conserving, SurfaceParams::Gaussian(g)) = (&energy, &surface) {
+            if g.sigma_um_max.is_some() {
+                // The energy table is built for one sigma.
+                return Err(err(
+                    "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma)".to_string(),
+                ));
+            }
+        }
         Ok(MaterialParams {
             surface,
             fresnel,
@@ -246,5 +254,29 @@ mod tests {
             r#"{"surface":"periodic","period_um":1.2,"coherence_um":1,"profile":"sine","height_um":0.1}"#,
         );
         assert!(m.contains("[1.8, 10000]"), "{m}");
+    }
+
+    #[test]
+    fn sigma_um_max_is_checked() {
+        let m = message(r#"{"surface":"gaussian","sigma_um":0.2,"sigma_um_max":0.1,"corr_um":2}"#);
+        assert!(
+            m.contains("'sigma_um_max'") && m.contains("below 'sigma_um'"),
+            "{m}"
+        );
+        let m = message(
+            r#"{"surface":"gaussian","sigma_um":0.1,"sigma_um_max":0.5,"corr_um":2,"energy":"conserving"}"#,
+        );
+        assert!(
+            m.contains("'sigma_um_max'") && m.contains("conserving"),
+            "{m}"
+        );
+        let m = message(
+            r#"{"surface":"fractal","hurst":0.5,"sigma_um":0.1,"lag_um":1,"sigma_um_max":0.5}"#,
+        );
+        assert!(m.contains("sigma_um_max"), "{m}");
+        MaterialParams::from_json(
+            r#"{"surface":"gaussian","sigma_um":0.1,"sigma_um_max":0.5,"corr_um":2}"#,
+        )
+        .unwrap();
     }
 }

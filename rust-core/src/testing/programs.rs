@@ -6,7 +6,7 @@
 use super::chi2::Sampler;
 use crate::benchmark::SplitMix64 as Rng;
 use crate::material::program::ProgramKind;
-use crate::program::{decode, Program};
+use crate::program::{decode, ParamId, Program};
 use crate::sampling::SampleResult;
 use crate::Brdf;
 use glam::DVec3;
@@ -162,6 +162,9 @@ pub struct ProgramSampler {
     coherent: Program,
     wi: DVec3,
     lambda_nm: Option<f64>,
+    /// A parameter's value in place of the stored one (a renderer's
+    /// texture value at a point).
+    param: Option<(ParamId, f64)>,
 }
 
 impl ProgramSampler {
@@ -184,7 +187,26 @@ impl ProgramSampler {
             coherent: exported(brdf, c).expect("a coherent program"),
             wi,
             lambda_nm,
+            param: None,
         }
+    }
+
+    /// The sampler with the parameter `id` at `value` in every program.
+    pub fn with_param(mut self, id: ParamId, value: f64) -> ProgramSampler {
+        self.param = Some((id, value));
+        self
+    }
+
+    fn run(&self, p: &Program, inputs: &[f64]) -> Vec<f64> {
+        let params: Vec<f64> = p
+            .params
+            .iter()
+            .map(|&(id, v)| match self.param {
+                Some((pid, value)) if pid == id => value,
+                _ => v as f64,
+            })
+            .collect();
+        p.run_with_params(inputs, &params)
     }
 }
 
@@ -192,7 +214,7 @@ impl Sampler for ProgramSampler {
     fn sample(&self, rnd: [f64; 3]) -> SampleResult {
         let mut inputs = vec![self.wi.x, self.wi.y, self.wi.z, rnd[0], rnd[1], rnd[2]];
         inputs.extend(self.lambda_nm);
-        let out = self.sample.run(&inputs);
+        let out = self.run(&self.sample, &inputs);
         let wo = DVec3::new(out[0], out[1], out[2]);
         let coherent = out[3] > 0.5;
         if coherent {
@@ -214,12 +236,12 @@ impl Sampler for ProgramSampler {
     fn pdf(&self, wo: DVec3) -> f64 {
         let mut inputs = vec![self.wi.x, self.wi.y, self.wi.z, wo.x, wo.y, wo.z];
         inputs.extend(self.lambda_nm);
-        self.pdf.run(&inputs)[0]
+        self.run(&self.pdf, &inputs)[0]
     }
 
     fn coherent_probability(&self) -> f64 {
         let mut inputs = vec![self.wi.x, self.wi.y, self.wi.z];
         inputs.extend(self.lambda_nm);
-        *self.coherent.run(&inputs).last().unwrap()
+        *self.run(&self.coherent, &inputs).last().unwrap()
     }
 }

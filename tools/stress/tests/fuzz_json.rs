@@ -20,7 +20,7 @@ static REFUSED: AtomicU64 = AtomicU64::new(0);
 static PROGRAM_RUNS: AtomicU64 = AtomicU64::new(0);
 
 /// Every key the parameters know (docs/parameters.md).
-const KEYS: [&str; 19] = [
+const KEYS: [&str; 20] = [
     "surface",
     "energy",
     "sigma_um",
@@ -40,6 +40,7 @@ const KEYS: [&str; 19] = [
     "k",
     "series_tolerance",
     "rgb_nodes",
+    "sigma_um_max",
 ];
 
 /// A refusal must name a key (as a whole word) or say what is wrong with the

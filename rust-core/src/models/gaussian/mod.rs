@@ -80,7 +80,11 @@ pub struct Gaussian {
     strategies: OnceLock<StrategyTable<Lobe>>,
     /// The RGB program's table (`program.rs`), built on the first export
     /// of the RGB eval program.
-    rgb_program: OnceLock<Option<program::RgbProgramTable>>,
+    rgb_program: OnceLock<Option<Box<program::RgbProgramTable>>>,
+    /// A sigma texture's largest value (`sigma_um_max`): the programs then
+    /// read sigma as a parameter everywhere (the renderer gives it per
+    /// point) and their tables serve every sigma up to it.
+    sigma_um_max: Option<f64>,
 }
 
 impl Gaussian {
@@ -91,7 +95,10 @@ impl Gaussian {
             GaussianSurface::isotropic(p.sigma_um, p.corr_x_um)
         };
         surface.series = SeriesSettings::with_tolerance(p.series_tolerance);
-        Gaussian::from_surface(surface)
+        Gaussian {
+            sigma_um_max: p.sigma_um_max,
+            ..Gaussian::from_surface(surface)
+        }
     }
 
     fn from_surface(surface: GaussianSurface) -> Gaussian {
@@ -101,6 +108,7 @@ impl Gaussian {
             albedo: OnceLock::new(),
             strategies: OnceLock::new(),
             rgb_program: OnceLock::new(),
+            sigma_um_max: None,
         }
     }
 

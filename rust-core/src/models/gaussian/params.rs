@@ -26,6 +26,9 @@ pub struct GaussianParams {
     pub series_tolerance: f64,
     /// Wavelength nodes of the RGB rule.
     pub rgb_nodes: usize,
+    /// The largest sigma a renderer's texture gives (per point, through the
+    /// programs' parameter): the programs serve every sigma up to it.
+    pub sigma_um_max: Option<f64>,
 }
 
 const _: () = assert!(range::RGB_NODES.1 <= MAX_RGB_NODES);
@@ -45,8 +48,17 @@ impl crate::models::ModelParams for GaussianParams {
             "corr_y_um",
             "series_tolerance",
             "rgb_nodes",
+            "sigma_um_max",
         ])?;
         let sigma_um = r.required("sigma_um", range::SIGMA_UM, false, " um")?;
+        let sigma_um_max = r.ranged("sigma_um_max", range::SIGMA_UM, false, " um")?;
+        if let Some(max) = sigma_um_max {
+            if max < sigma_um {
+                return Err(StamError::new(format!(
+                    "parameter 'sigma_um_max' ({max}) is below 'sigma_um' ({sigma_um}): it is the largest value a sigma texture gives"
+                )));
+            }
+        }
         let corr = r.ranged("corr_um", range::CORR_UM, false, " um")?;
         let corr_x = r.ranged("corr_x_um", range::CORR_UM, false, " um")?;
         let corr_y = r.ranged("corr_y_um", range::CORR_UM, false, " um")?;
@@ -84,6 +96,7 @@ impl crate::models::ModelParams for GaussianParams {
             rgb_nodes: r
                 .integer("rgb_nodes", range::RGB_NODES)?
                 .unwrap_or(DEFAULT_RGB_NODES),
+            sigma_um_max,
         })
     }
 }

@@ -293,13 +293,32 @@ impl<'a> SlopeLobe<'a> {
 }
 
 impl Gaussian {
+    /// sigma times `c` for the sampling programs: a constant, or with a
+    /// sigma texture (`sigma_um_max`) the parameter, whose value the
+    /// renderer gives per point (the strategy, above all the coherent
+    /// lobe's share, must follow the point's sigma; sample and pdf read the
+    /// same value, so they stay consistent).
+    fn sigma_times<'a>(&self, b: &'a Builder, c: f64) -> Value<'a> {
+        match self.sigma_um_max {
+            Some(_) => b.param(ParamId::SigmaUm, self.surface.sigma_um) * c,
+            None => b.c(self.surface.sigma_um * c),
+        }
+    }
+
     /// The RGB program's table, built on first use.
     fn rgb_program_table(&self, shading: &Shading) -> Option<&RgbProgramTable> {
         self.rgb_program
             .get_or_init(|| {
-                RgbProgramTable::build(&self.surface, shading.rgb_rule, shading.fresnel, false)
+                RgbProgramTable::build(
+                    &self.surface,
+                    shading.rgb_rule,
+                    shading.fresnel,
+                    false,
+                    self.sigma_um_max,
+                )
+                .map(Box::new)
             })
-            .as_ref()
+            .as_deref()
     }
 
     /// The coherent probability at unit wi (above the horizon) and
@@ -315,7 +334,7 @@ impl Gaussian {
         lambda: Value<'a>,
     ) -> Value<'a> {
         let s = &self.surface;
-        let a = (2000.0 * PI * 2.0 * s.sigma_um) / lambda * cos_i;
+        let a = self.sigma_times(b, 2000.0 * PI * 2.0) / lambda * cos_i;
         let g0 = a * a;
         let mut p_coh = g0.gt(COHERENT_MAX_G).select(0.0, (-g0).exp());
         if s.isotropic {
@@ -359,7 +378,7 @@ impl Gaussian {
         };
         let lambda = lambda_nm.unwrap_or_else(|| b.c(RGB_SAMPLING_NM));
         let k = (2000.0 * PI) / lambda;
-        let a = k * (2.0 * s.sigma_um) * wi[2];
+        let a = k * self.sigma_times(b, 2.0) * wi[2];
         let g0 = a * a;
         let series = g0.lt(SERIES_MAX_G);
         let (lobes, m_mean) = self.slope_lobes(b, wi, k, g0, series);
@@ -374,7 +393,7 @@ impl Gaussian {
             let sd = (m_mean * 2.0).sqrt() / (k * s.corr_x_um);
             let to_rim = 1.0 - (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
             let near = series & to_rim.lt(sd * 2.0);
-            let kf = k * s.sigma_um;
+            let kf = k * self.sigma_times(b, 1.0);
             let smooth = near.select((-(kf * kf)).exp(), 0.0);
             let twin = TwinLobe::new(wi, sd, (-g0).exp());
             (
@@ -495,11 +514,17 @@ impl Gaussian {
             let (ii, jj) = [(0, 0), (0, 1), (1, 1)][i];
             fit(ii, jj) * beta + frozen[i] * (1.0 - beta)
         });
-        let beckmann = [
-            b.c(2.0 * tx2 / (4.0 * s.sigma_um * s.sigma_um)),
-            b.c(0.0),
-            b.c(2.0 * ty2 / (4.0 * s.sigma_um * s.sigma_um)),
-        ];
+        let beckmann = match self.sigma_um_max {
+            Some(_) => {
+                let four_s2 = self.sigma_times(b, 2.0) * self.sigma_times(b, 2.0);
+                [(2.0 * tx2) / four_s2, b.c(0.0), (2.0 * ty2) / four_s2]
+            }
+            None => [
+                b.c(2.0 * tx2 / (4.0 * s.sigma_um * s.sigma_um)),
+                b.c(0.0),
+                b.c(2.0 * ty2 / (4.0 * s.sigma_um * s.sigma_um)),
+            ],
+        };
         let fitted = std::array::from_fn(|i| series.select(laplace[i], beckmann[i]));
         let mirror = std::array::from_fn(|i| series.select(frozen[i], beckmann[i]));
         let shift = a * beta;

@@ -55,13 +55,17 @@ impl RgbProgramTable {
     }
 
     /// The table of `surface` for `rule` and `fresnel`; `per_node` forces the
-    /// per-node layout (tests). None when the rule is empty or the table
-    /// would not fit RGB_MAX_BYTES.
+    /// per-node layout (tests). `sigma_um_max` (a sigma texture's largest
+    /// value): the table serves every sigma up to it (its rows are in g0 =
+    /// (sigma w)^2 and its columns in rho, both universal; only the folded
+    /// layout depends on the build's sigma, so it is not used then). None
+    /// when the rule is empty or the table would not fit RGB_MAX_BYTES.
     pub(super) fn build(
         surface: &GaussianSurface,
         rule: &RgbRule,
         fresnel: &Fresnel,
         per_node: bool,
+        sigma_um_max: Option<f64>,
     ) -> Option<RgbProgramTable> {
         let n = rule.len();
         let k = &rule.k_per_um;
@@ -72,8 +76,10 @@ impl RgbProgramTable {
         let k_min = k.iter().cloned().fold(f64::INFINITY, f64::min);
         let k_max = k.iter().cloned().fold(0.0, f64::max);
         let k_ref2 = k_min * k_max;
-        let combined = !per_node && (fresnel.is_spectrally_flat() || surface.isotropic);
-        let folded = combined && !fresnel.is_spectrally_flat();
+        let flat = fresnel.is_spectrally_flat();
+        let combined = !per_node && (flat || (surface.isotropic && sigma_um_max.is_none()));
+        let folded = combined && !flat;
+        let sigma_rows = sigma_um_max.unwrap_or(sigma).max(sigma);
         let values = match (combined, folded) {
             (true, true) => 7,
             (true, false) => 4,
@@ -81,7 +87,7 @@ impl RgbProgramTable {
         };
         // |w| <= 2, so g0 <= 4 sigma^2; down to g = RGB_G_LO at the bluest
         // node, and at least 8 rows.
-        let ln_g0_hi = (4.0 * sigma * sigma).ln();
+        let ln_g0_hi = (4.0 * sigma_rows * sigma_rows).ln();
         let ln_g0_lo = (RGB_G_LO / (k_max * k_max)).ln().min(ln_g0_hi - 8.0 * D_U);
         let rows = ((ln_g0_hi - ln_g0_lo) / D_U).ceil() as usize + 2;
         let limits = column_limits(surface, k, ln_g0_lo, rows, k_ref2, RGB_CUT);

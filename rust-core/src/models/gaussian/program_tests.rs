@@ -507,6 +507,7 @@ fn rgb_table_layouts_match_native() {
                 shading.rgb_rule,
                 shading.fresnel,
                 per_node,
+                None,
             )
             .unwrap();
             let built = start.elapsed();
