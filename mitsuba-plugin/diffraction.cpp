@@ -197,9 +197,9 @@ The parameters the user gives, ``twist`` and ``tracks`` always and
 ``mi.traverse``. In the AD variants (``llvm_ad_*``, ``cuda_ad_*``) the
 numbers the material's programs read are differentiable (the Gaussian
 model's ``sigma_um`` and correlation lengths, the fractal's ``sigma_um``
-and ``lag_um``, a constant ``fresnel``, ``eta`` and ``k``, and ``twist`` of
-anisotropic materials; docs/inverse.md); the others are marked
-non-differentiable. Mitsuba's traversal carries numbers
+and ``lag_um``, a constant ``fresnel``, ``eta`` and ``k``, ``twist`` of anisotropic
+materials, in spectral variants a grating's period, coherence, height and width;
+docs/inverse.md); the others are non-differentiable. Mitsuba's traversal carries numbers
 and registered types but no strings, so the string parameters travel as a
 ``mi.Properties`` whose plugin name is the value: ``params['fresnel'] =
 'gold'`` works (Mitsuba converts the string), and

@@ -2,8 +2,12 @@
 """Inverse rendering with the `diffraction` BSDF (issue 14, docs/inverse.md):
 recover material parameters from target images rendered with known ones.
 
-    .venv/bin/python scripts/inverse_rendering.py [--case gaussian] [--steps 200]
-        [--variant llvm_ad_rgb] [--out out/inverse]
+    .venv/bin/python scripts/inverse_rendering.py [--case gaussian|grating] [--steps 200]
+        [--variant V] [--out out/inverse]
+
+Case `grating` (llvm_ad_spectral): the period of a sine grating from 30%
+high, under a wide strip light beside the mirror direction, so that the
+plate shows the first order's rainbow, whose place follows the period.
 
 Case `gaussian`: the RMS height sigma_um and the correlation length corr_um
 of a Gaussian surface, each started 30% off (sigma 30% high, corr 30% low).
@@ -33,21 +37,41 @@ sys.path.insert(0, HERE)
 import stam_mitsuba  # noqa: E402
 
 CASES = {
-    # truth, start (30% off), the material's other parameters
+    # truth, start (30% off), the material's other parameters, the variant
     'gaussian': {
         'truth': {'sigma_um': 0.05, 'corr_um': 2.0},
         'start': {'sigma_um': 0.065, 'corr_um': 1.4},
         'fixed': {'surface': 'gaussian', 'fresnel': 0.9},
+        'variant': 'llvm_ad_rgb',
+    },
+    # The grating's period: its spectral kernel reads it (the RGB programs
+    # keep it as a constant), so the case runs in llvm_ad_spectral.
+    'grating': {
+        'truth': {'period_um': 1.2},
+        'start': {'period_um': 1.56},
+        'fixed': {'surface': 'periodic', 'profile': 'sine', 'height_um': 0.2,
+                  'coherence_um': 4.0, 'fresnel': 0.9},
+        'variant': 'llvm_ad_spectral',
+        'lights': 'strip',
     },
 }
 
 
-def scene_dict(mi, bsdf, res, spp):
+def scene_dict(mi, bsdf, res, spp, lights='points'):
     T = mi.ScalarTransform4f
-    lights = {'light%d' % i: {'type': 'point', 'position': p,
-                              'intensity': {'type': 'spectrum', 'value': w}}
-              for i, (p, w) in enumerate([([0.0, 1.8, 1.9], 6.0), ([0.9, 1.2, 2.6], 6.0),
-                                          ([-1.0, 1.5, 1.6], 4.0)])}
+    if lights == 'points':
+        lights = {'light%d' % i: {'type': 'point', 'position': p,
+                                  'intensity': {'type': 'spectrum', 'value': w}}
+                  for i, (p, w) in enumerate([([0.0, 1.8, 1.9], 6.0), ([0.9, 1.2, 2.6], 6.0),
+                                              ([-1.0, 1.5, 1.6], 4.0)])}
+    else:
+        # A wide strip light low on the side the grooves disperse towards:
+        # the plate shows a continuous rainbow whose place follows the period
+        lights = {'strip': {'type': 'rectangle',
+                            'to_world': T().look_at(origin=[1.3, 2.0, 1.8], target=[0, 0, 0],
+                                                    up=[0, 0, 1]).scale([1.0, 0.3, 1]),
+                            'emitter': {'type': 'area',
+                                        'radiance': {'type': 'spectrum', 'value': 4.0}}}}
     return {
         'type': 'scene',
         'integrator': {'type': 'prb', 'max_depth': 2},
@@ -66,14 +90,15 @@ def scene_dict(mi, bsdf, res, spp):
 SEED = 1
 
 
-def optimise(case, steps, variant='llvm_ad_rgb', res=48, spp=8, lr=0.05, log=print):
+def optimise(case, steps, variant=None, res=48, spp=8, lr=0.05, log=print):
     """Returns {'truth', 'start', 'history': [(loss, {key: value})], 'images':
-    (before, target, after), 'seconds'}."""
-    mi = stam_mitsuba.setup(variant)
+    (before, target, after), 'seconds'}; variant None: the case's."""
+    mi = stam_mitsuba.setup(variant or CASES[case]['variant'])
     import drjit as dr
     c = CASES[case]
     keys = list(c['truth'])
-    scene = mi.load_dict(scene_dict(mi, {**c['fixed'], **c['truth']}, res, spp))
+    scene = mi.load_dict(scene_dict(mi, {**c['fixed'], **c['truth']}, res, spp,
+                                    c.get('lights', 'points')))
     # The target and every iterate render the same pixel samples (one seed):
     # their difference is the parameters' alone, so the loss reaches 0 at the
     # truth; the gradient passes draw their own samples (seed_grad).
@@ -157,7 +182,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--case', default='gaussian', choices=sorted(CASES))
     ap.add_argument('--steps', type=int, default=200)
-    ap.add_argument('--variant', default='llvm_ad_rgb')
+    ap.add_argument('--variant', default=None, help="default: the case's (gaussian: "
+                    "llvm_ad_rgb, grating: llvm_ad_spectral)")
     ap.add_argument('--tolerance', type=float, default=0.01)
     ap.add_argument('--out', default=os.path.join(os.path.dirname(HERE), 'out', 'inverse'))
     args = ap.parse_args(argv)

@@ -114,19 +114,48 @@ def test_gradient_equals_finite_difference(variant, key, bsdf, step):
     assert abs(ad - fd) <= GRADIENT_TOL * abs(fd), (ad, fd)
 
 
+GRATING = {'surface': 'periodic', 'period_um': 1.2, 'profile': 'sine', 'height_um': 0.2,
+           'coherence_um': 6.0, 'fresnel': 0.9}
+RECT = {'surface': 'periodic', 'period_um': 1.2, 'profile': 'rect', 'height_um': 0.15,
+        'width_um': 0.4, 'coherence_um': 6.0, 'fresnel': 0.9}
+
+
+@pytest.mark.parametrize('key,bsdf,step', [
+    ('period_um', GRATING, 0.004),
+    ('coherence_um', GRATING, 0.1),
+    ('height_um', GRATING, 0.004),
+    ('width_um', RECT, 0.004),
+])
+def test_grating_gradient_equals_finite_difference(key, bsdf, step):
+    """A grating's parameters, read by its spectral kernel (llvm_ad_spectral;
+    the RGB programs integrate each order with tables built for the period
+    and coherence and keep them: NonDifferentiable there)."""
+    stam_mitsuba.setup('llvm_ad_spectral')
+    x0, fd, ad, values = check_gradient({'type': 'diffraction', **bsdf}, key, step)
+    print('llvm_ad_spectral %s = %g: AD %.6g, central difference %.6g (means %s)'
+          % (key, x0, ad, fd, values))
+    assert abs(fd) > 1e-4 * max(abs(v) for v in values), 'the parameter does not matter here'
+    assert abs(ad - fd) <= GRADIENT_TOL * abs(fd), (ad, fd)
+
+
 @pytest.mark.parametrize('variant', VARIANTS)
 def test_parameters_the_programs_do_not_read_are_not_differentiable(variant):
-    """A grating's parameters are not read by its programs yet: mi.traverse
-    says so instead of giving silent zero gradients."""
+    """mi.traverse marks Differentiable exactly what the variant's programs
+    read, instead of giving silent zero gradients: a grating's period,
+    height and coherence in spectral variants only (the RGB programs keep
+    them as constants); a fractal's hurst never."""
     stam_mitsuba.setup(variant)
-    b = mi.load_dict({'type': 'diffraction', 'surface': 'periodic', 'period_um': 1.2,
-                      'profile': 'sine', 'height_um': 0.12, 'coherence_um': 10.0})
+    b = mi.load_dict({'type': 'diffraction', **GRATING})
     params = mi.traverse(b)
     for key in ('period_um', 'height_um', 'coherence_um'):
-        assert params.flags(key) & mi.ParamFlags.NonDifferentiable.value, key
+        differentiable = params.flags(key) & mi.ParamFlags.NonDifferentiable.value == 0
+        assert differentiable == (variant == 'llvm_ad_spectral'), key
     g = mi.load_dict({'type': 'diffraction', 'surface': 'gaussian', 'sigma_um': 0.1,
                       'corr_um': 1.0})
     assert mi.traverse(g).flags('sigma_um') & mi.ParamFlags.NonDifferentiable.value == 0
+    f = mi.load_dict({'type': 'diffraction', 'surface': 'fractal', 'sigma_um': 0.1,
+                      'hurst': 0.7, 'lag_um': 1.0})
+    assert mi.traverse(f).flags('hurst') & mi.ParamFlags.NonDifferentiable.value
 
 
 @pytest.mark.parametrize('variant', VARIANTS)

@@ -90,8 +90,14 @@ fn cases() -> Vec<(Case, &'static [ProgramKind], &'static [ParamId])> {
         (
             Case {
                 name: "cd 0.8",
-                template: r#"{"surface":"cd","fresnel":$fresnel}"#,
-                params: &[(Fresnel, 0.8)],
+                template: r#"{"surface":"cd","period_um":$period_um,"coherence_um":$coherence_um,"height_um":$height_um,"width_um":$width_um,"fresnel":$fresnel}"#,
+                params: &[
+                    (PeriodUm, 2.5),
+                    (CoherenceUm, 50.0),
+                    (HeightUm, 0.15),
+                    (WidthUm, 0.5),
+                    (Fresnel, 0.8),
+                ],
                 lanes: cd_lanes,
             },
             &EVAL,

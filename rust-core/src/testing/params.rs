@@ -205,8 +205,8 @@ pub fn changed(
 /// The central difference (relative step `h`) of the f64 program with
 /// respect to `id` against the same difference of the native path, as
 /// d ln f / d ln p where f is above `floor` of its peak: (largest relative
-/// error where |d ln f / d ln p| >= 0.1, largest absolute error, the
-/// number of the former).
+/// error where |d ln f / d ln p| >= 0.1, largest absolute error where it is
+/// smaller, the number of the former).
 pub fn derivative(
     case: &Case,
     kind: ProgramKind,
@@ -243,10 +243,11 @@ pub fn derivative(
             }
             let d_native = (nu[c] - nd[c]) / (2.0 * h * f[c]);
             let d_prog = (pu[c] - pd[c]) / (2.0 * h * f_prog[c]);
-            abs = abs.max((d_prog - d_native).abs());
             if d_native.abs() >= 0.1 {
                 checked += 1;
                 rel = rel.max((d_prog - d_native).abs() / d_native.abs());
+            } else {
+                abs = abs.max((d_prog - d_native).abs());
             }
         }
     }

@@ -49,6 +49,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod orders;
+#[cfg(test)]
+mod param_tests;
 pub mod params;
 mod program;
 mod program_rgb;

@@ -12,10 +12,12 @@
 //! - No coherent lobe (order 0 is a Gaussian lobe like the others): the
 //!   trait's zero defaults are the native values.
 
-use super::{Model, Periodic, PeriodicSurface, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT};
+use super::{
+    Model, Periodic, PeriodicSurface, Profile, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT,
+};
 use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::program::{PairProgram, Vec3};
-use crate::program::{Builder, Mask, Table, Value};
+use crate::program::{Builder, Mask, ParamId, Table, Value};
 use std::f64::consts::PI;
 
 /// |c_n(beta)|^2 as program operations: the closed form of the rect
@@ -262,6 +264,15 @@ impl PeriodicSurface {
     /// from u P - n lambda (P the period in nm) with the product's rounding
     /// error carried, so that the distance to a narrow peak keeps f32's
     /// relative precision at high orders.
+    ///
+    /// The period and the coherence length are the program's parameters
+    /// (`Op::Param`): a renderer may change them (and differentiate). The
+    /// period as P = p_hi + p_lo: p_hi the built period's f32 value (a
+    /// constant), p_lo the built value's f64 residual plus the parameter's
+    /// change from its f32 value (exactly 0 at the build, in f32, and
+    /// carrying the derivative). The orders' count and the reach that picks
+    /// them stay the built ones: an order they miss after a change of a few
+    /// percent is beyond KERNEL_TAIL_EXPONENT.
     pub(super) fn kernel_program<'a>(
         &self,
         b: &'a Builder,
@@ -271,10 +282,11 @@ impl PeriodicSurface {
         lambda_nm: Value<'a>,
     ) -> Value<'a> {
         let w = pair.w;
-        let l = self.coherence_um;
+        let period = b.param(ParamId::PeriodUm, self.period_um);
+        let l = b.param(ParamId::CoherenceUm, self.coherence_um);
         let period_nm = 1000.0 * self.period_um;
         let p_hi = period_nm as f32 as f64;
-        let p_lo = period_nm - p_hi;
+        let p_lo = (period - self.period_um as f32 as f64) * 1000.0 + (period_nm - p_hi);
         // u = u_hi + u_lo as the native path has it (see `exact_uv`), and
         // u P = p + p_err up to the rounding of the small terms.
         let [(u, u_lo), (v, v_lo)] = exact_uv(pair);
@@ -283,7 +295,7 @@ impl PeriodicSurface {
         let inv_lambda = 1.0 / lambda_nm;
         let x = (p + p_err) * inv_lambda;
         // orders_near: e_min of the nearest order, reach around x.
-        let scale = 2.0 * PI * l / self.period_um;
+        let scale = 2.0 * PI * self.coherence_um / self.period_um;
         let frac = x - (x + 0.5).floor();
         let e_min = (frac * scale).sq();
         let reach = (e_min + KERNEL_TAIL_EXPONENT).min(EXP_UNDERFLOW).sqrt() * (1.0 / scale);
@@ -291,21 +303,89 @@ impl PeriodicSurface {
         let hi = (x + reach).floor();
         let e_v = (k * (v + v_lo) * l).sq();
         // l (k u - 2 pi n / Lam) = A (u P - n lambda) / lambda.
-        let a = 2000.0 * PI * l / period_nm;
+        let a = l * (2.0 * PI) / period;
         let beta = k * w;
-        let at = powers.at(b, beta);
+        let profile = self.profile_program(b, period);
+        let at = match profile {
+            ProfileProgram::Rect { .. } => None,
+            ProfileProgram::Scaled(_) => Some(powers.at(b, profile.scaled_beta(beta))),
+        };
         let mut sum = b.c(0.0);
         for i in 0..self.max_orders_near() {
             let n = lo + i as f64;
             let d = (n.fma(-lambda_nm, p) + p_err) * inv_lambda * a;
             let e = d.fma(d, e_v);
-            let term = powers.power(b, &at, n) * (-e).exp();
+            let power = match (profile, &at) {
+                (ProfileProgram::Rect { height, fill }, _) => rect_power(beta, height, fill, n),
+                (_, Some(at)) => powers.power(b, at, n),
+                (_, None) => unreachable!("the powers are prepared for a scaled profile"),
+            };
+            let term = power * (-e).exp();
             let take = n.le(hi) & e.lt(EXP_UNDERFLOW);
             sum = sum + take.select(term, 0.0);
         }
         let kernel = (k * l / w).sq() * (1.0 / PI) * sum;
         let ok = k.gt(0.0) & w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
         ok.select(kernel.finite_non_negative(), 0.0)
+    }
+}
+
+/// The profile's parameters as the spectral kernel reads them (`Op::Param`):
+/// the rect profile's height and fill d / Lam, for its closed form; a sine
+/// profile's height as the scale of beta (its c_n depend on beta h only:
+/// the table built at height h0 read at beta h / h0; a table's beta range
+/// is the built one, so a height raised by a few percent reads its last
+/// row where |beta| is within that of the band's bluest retro-reflection).
+#[derive(Clone, Copy)]
+enum ProfileProgram<'a> {
+    Rect {
+        height: Value<'a>,
+        fill: Value<'a>,
+    },
+    /// beta's factor (None: tabulated heights, not a parameter)
+    Scaled(Option<Value<'a>>),
+}
+
+impl<'a> ProfileProgram<'a> {
+    fn scaled_beta(&self, beta: Value<'a>) -> Value<'a> {
+        match self {
+            ProfileProgram::Scaled(Some(f)) => (beta * *f).max(-BETA_MAX),
+            _ => beta,
+        }
+    }
+}
+
+/// |c_n|^2 of the rect profile (`PowerProgram::power`'s closed form) with
+/// its height and fill as values: 1 - 4 f (1 - f) s^2 for order 0, 4 f^2
+/// s^2 sinc^2(pi n f) for the others, s = sin(beta h / 2).
+fn rect_power<'a>(beta: Value<'a>, height: Value<'a>, fill: Value<'a>, n: Value<'a>) -> Value<'a> {
+    let s = (beta * height * 0.5).sin();
+    let s2 = s * s;
+    let zero = (1.0 - s2 * (fill * (1.0 - fill)) * 4.0).max(0.0);
+    // x is never 0 where it is used (and a safe 1 at order 0, whose
+    // unselected branch would otherwise give NaN derivatives)
+    let order0 = n.eq(0.0);
+    let x = order0.select(1.0, n.abs() * fill * PI);
+    let sinc = x.sin() / x;
+    let other = s2 * (fill * fill) * (sinc * sinc) * 4.0;
+    order0.select(zero, other)
+}
+
+impl PeriodicSurface {
+    fn profile_program<'a>(&self, b: &'a Builder, period: Value<'a>) -> ProfileProgram<'a> {
+        match self.profile {
+            Profile::Rect {
+                height_um,
+                width_um,
+            } => ProfileProgram::Rect {
+                height: b.param(ParamId::HeightUm, height_um),
+                fill: b.param(ParamId::WidthUm, width_um) / period,
+            },
+            Profile::Sine { height_um } => ProfileProgram::Scaled(Some(
+                b.param(ParamId::HeightUm, height_um) * (1.0 / height_um),
+            )),
+            Profile::Tabulated { .. } => ProfileProgram::Scaled(None),
+        }
     }
 }
 
