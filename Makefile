@@ -32,7 +32,7 @@ PLUGIN_SO := $(BUILD)/plugins/diffraction.so
 PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
 PLUGIN_HDR := mitsuba-plugin/batch.h mitsuba-plugin/params_json.h mitsuba-plugin/program.h \
               mitsuba-plugin/jit_path.h mitsuba-plugin/plugin_params.h mitsuba-plugin/shape_kind.h \
-              mitsuba-plugin/sigma_texture.h
+              mitsuba-plugin/param_textures.h
 # The mitsuba and drjit versions the plugin is compiled against (JSON); the
 # package stam_diffraction refuses to load the plugin under others.
 PLUGIN_ABI := $(BUILD)/plugins/diffraction.abi.json

@@ -39,7 +39,7 @@
 #include "params_json.h"
 #include "plugin_params.h"
 #include "shape_kind.h"
-#include "sigma_texture.h"
+#include "param_textures.h"
 
 NAMESPACE_BEGIN(mitsuba)
 
@@ -332,8 +332,8 @@ public:
                 if (name == "twist" && type == PType::Object) {
                     // A twist map (degrees; any texture, unbounded)
                     m_twist_texture = props.get_unbounded_texture<Texture>("twist");
-                } else if (name == "sigma_um" && type == PType::Object) {
-                    m_sigma.texture = props.get_unbounded_texture<Texture>("sigma_um");
+                } else if (type == PType::Object && m_textures.take(props, name)) {
+                    // sigma_um, height_um: a texture (param_textures.h)
                 } else if (name == "twist") {
                     m_twist = (ScalarFloat) it->template get<double>();
                     m_twist_diff = Float(m_twist);
@@ -371,7 +371,7 @@ public:
                     m_params.push_back(p);
                 } else if (type == PType::Object) {
                     throw ParamError("parameter '" + name + "' cannot take a texture (of the "
-                                     "material's parameters only 'twist' and 'sigma_um' can)");
+                                     "material's parameters only 'twist', 'sigma_um' and 'height_um' can)");
                 } else {
                     throw ParamError("parameter '" + name + "' has type " +
                                      std::string(property_type_name(type)) +
@@ -393,8 +393,7 @@ public:
                 throw ParamError("parameter 'k' needs 'eta' (the complex index eta + i k; "
                                  "eta in [0.001, 100])");
 
-            if (m_sigma)
-                m_sigma.attach(m_params);
+            m_textures.attach(m_params);
             check_frame();
             commit(build_core());
         } catch (const ParamError &e) {
@@ -431,8 +430,7 @@ public:
             else if (p.kind == Param::String || p.kind == Param::Json)
                 cb->put(p.name, p.holder, ParamFlags::NonDifferentiable);
         }
-        if (m_sigma)
-            cb->put("sigma_um", m_sigma.texture, ParamFlags::Differentiable);
+        m_textures.traverse(cb);
         if (m_twist_texture)
             cb->put("twist", m_twist_texture, ParamFlags::Differentiable);
         else if constexpr (dr::is_jit_v<Float>)
@@ -543,6 +541,7 @@ public:
         std::ostringstream oss;
         oss << "Diffraction[" << std::endl;
         describe(oss, m_params);
+        m_textures.describe(oss);
         oss << "  twist = ";
         if (m_twist_texture)
             oss << string::indent(m_twist_texture) << "," << std::endl;
@@ -644,7 +643,7 @@ private:
             if (keys.empty())
                 return false;
             for (const std::string &k : keys) {
-                if (k == "twist" || (k == "sigma_um" && m_sigma))
+                if (k == "twist" || m_textures.owns(k))
                     continue; // read per point, or from memory
                 auto it = std::find_if(m_params.begin(), m_params.end(),
                                        [&](const Param &p) { return p.name == k; });
@@ -933,8 +932,7 @@ private:
                    bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
         typename Jit::Params params{ m_param_array, {} };
-        if (m_sigma)
-            params.per_point[STAM_PARAM_SIGMA_UM] = m_sigma.at(si, st.active_e || st.active_s);
+        m_textures.apply(params, si, st.active_e || st.active_s);
         if (st.do_eval) {
             if (want_value)
                 q.value = dr::select(st.active_e,
@@ -965,7 +963,7 @@ private:
     std::vector<Param> m_params;
     ScalarFloat m_twist = 0.f;
     ref<Texture> m_twist_texture;           // a twist map (then m_twist is 0)
-    diffraction_detail::SigmaTexture<Float, Spectrum> m_sigma; // a sigma map (JIT variants)
+    diffraction_detail::ParamTextures<Float, Spectrum> m_textures; // sigma, height maps (JIT)
     Float m_twist_diff = 0.f;               // JIT variants: `twist` through mi.traverse
     Tracks m_tracks = Tracks::Linear;
     Properties m_tracks_holder{ "linear" }; // `tracks` through mi.traverse

@@ -32,7 +32,7 @@ template <typename Float> struct PluginParam {
     /// where the material's programs read it (STAM_PARAM_* `id`)
     Float diff = 0.f;
     int id = -1;
-    bool from_texture = false; // set from a texture (sigma_texture.h), not traversed
+    bool from_texture = false; // set from a texture (param_textures.h), not traversed
     std::string text;   // string value, or raw JSON
     std::string source; // String, Json: the user's string
     /// String, Json: the user's string as the plugin name of a Properties,

@@ -15,10 +15,10 @@ from mirror to rough with diffraction halos; a disc of brushed aluminium
 core integrates each spectrum, a grating's orders exactly: no wavelength
 noise) with a multi-jittered sampler. --classic adds the small scenes of
 earlier versions (cd.xml in both variants, grating, gaussian_smooth, brushed,
-fractal, sweep), the twist-map scene (brushed_twist_map) and the sigma-map
-scene (gaussian_wear_map, llvm_ad_spectral: a sigma texture needs a JIT
-variant). The studio environment and the disc's label are made by
-scripts/studio_env.py (out/env/).
+fractal, sweep), the twist-map scene (brushed_twist_map) and the sigma- and
+height-map scenes (gaussian_wear_map, cd_depth_map; llvm_ad_spectral: these
+textures need a JIT variant). The studio environment and the disc's label
+are made by scripts/studio_env.py (out/env/).
 
 --noise renders every scene a second time with another seed and prints the
 relative difference over lit pixels, mean |a - b| / mean a over the pixels
@@ -90,6 +90,9 @@ CLASSIC = [
      'Polished aluminium with a wear map: sigma_um a texture (0.012 um polished, '
      '0.1-0.3 um scratches)',
      dict(res=256, spp=64), 99.5),
+    ('cd_depth_map', 'cd_depth_map.xml', 'llvm_ad_spectral',
+     'Compact disc whose groove depth is a texture: sectors of 0.08 and 0.22 um',
+     dict(res=256, spp=128), 99.5),
     ('sweep', 'sweep.xml', 'scalar_spectral',
      'Sweep sigma/lambda 0.01..1, T 4 um',
      dict(res=160, width=400, spp=32), 99.0),

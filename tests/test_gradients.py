@@ -120,20 +120,23 @@ RECT = {'surface': 'periodic', 'period_um': 1.2, 'profile': 'rect', 'height_um':
         'width_um': 0.4, 'coherence_um': 6.0, 'fresnel': 0.9}
 
 
-@pytest.mark.parametrize('key,bsdf,step', [
-    ('period_um', GRATING, 0.004),
-    ('coherence_um', GRATING, 0.1),
-    ('height_um', GRATING, 0.004),
-    ('width_um', RECT, 0.004),
+@pytest.mark.parametrize('variant,key,bsdf,step', [
+    ('llvm_ad_spectral', 'period_um', GRATING, 0.004),
+    ('llvm_ad_spectral', 'coherence_um', GRATING, 0.1),
+    ('llvm_ad_spectral', 'height_um', GRATING, 0.004),
+    ('llvm_ad_spectral', 'width_um', RECT, 0.004),
+    ('llvm_ad_rgb', 'height_um', RECT, 0.002),
+    ('llvm_ad_rgb', 'width_um', RECT, 0.004),
 ])
-def test_grating_gradient_equals_finite_difference(key, bsdf, step):
-    """A grating's parameters, read by its spectral kernel (llvm_ad_spectral;
+def test_grating_gradient_equals_finite_difference(variant, key, bsdf, step):
+    """A grating's parameters, read by its spectral kernel (llvm_ad_spectral);
     the RGB programs integrate each order with tables built for the period
-    and coherence and keep them: NonDifferentiable there)."""
-    stam_mitsuba.setup('llvm_ad_spectral')
+    and coherence and keep those (NonDifferentiable there), but read a rect
+    profile's height and width (a closed form)."""
+    stam_mitsuba.setup(variant)
     x0, fd, ad, values = check_gradient({'type': 'diffraction', **bsdf}, key, step)
-    print('llvm_ad_spectral %s = %g: AD %.6g, central difference %.6g (means %s)'
-          % (key, x0, ad, fd, values))
+    print('%s %s = %g: AD %.6g, central difference %.6g (means %s)'
+          % (variant, key, x0, ad, fd, values))
     assert abs(fd) > 1e-4 * max(abs(v) for v in values), 'the parameter does not matter here'
     assert abs(ad - fd) <= GRADIENT_TOL * abs(fd), (ad, fd)
 

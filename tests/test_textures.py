@@ -30,7 +30,7 @@ BRUSHED = {'type': 'diffraction', 'surface': 'gaussian', 'sigma_um': 0.1, 'corr_
            'corr_y_um': 3.0}
 
 
-def eval_at(mi, bsdf, uv):
+def eval_at(mi, bsdf, uv, wo=(-0.1, -0.5)):
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wi = mi.Vector3f(0.3, 0.2, math.sqrt(1 - 0.13))
     si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
@@ -39,8 +39,8 @@ def eval_at(mi, bsdf, uv):
     si.uv = mi.Point2f(*uv)
     if mi.is_spectral:
         si.wavelengths = [450.0, 520.0, 590.0, 660.0]
-    return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(-0.1, -0.5, math.sqrt(0.74))),
-                    dtype=np.float64).ravel()
+    wo = mi.Vector3f(wo[0], wo[1], math.sqrt(1 - wo[0] ** 2 - wo[1] ** 2))
+    return np.array(bsdf.eval(mi.BSDFContext(), si, wo), dtype=np.float64).ravel()
 
 
 @pytest.mark.parametrize('variant', VARIANTS)
@@ -218,6 +218,64 @@ def test_sigma_map_values_are_differentiable(variant):
         values.append(tg.mean_of(scene))
     fd = (values[0] - values[1]) / (2 * h)
     v = mi.Float(0.1)
+    dr.enable_grad(v)
+    params[key] = v
+    params.update()
+    img = mi.render(scene, params=params, seed=1, seed_grad=tg.SEED, spp=16)
+    dr.backward(dr.mean(img, axis=None))
+    ad = float(dr.grad(v)[0])
+    assert abs(fd) > 1e-4 * max(values)
+    assert abs(ad - fd) <= tg.GRADIENT_TOL * abs(fd), (ad, fd)
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_height_map_gives_each_point_its_groove_depth(variant):
+    """A compact disc whose bump height is a texture (a 2 x 2 map of 0.08 to
+    0.2 um): at each texel the disc with that height as a number."""
+    mi = stam_mitsuba.setup(variant)
+    heights = [[0.08, 0.2], [0.15, 0.11]]
+    base = {'type': 'diffraction', 'surface': 'cd', 'coherence_um': 10.0, 'fresnel': 0.9}
+    mapped = mi.load_dict({**base, 'height_um': sigma_map(mi, heights)})
+    values = []
+    for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
+                           ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75))):
+        number = mi.load_dict({**base, 'height_um': heights[row][col]})
+        # wo on the first order's peak near 520 nm (u = -0.2, v = 0)
+        got, want = (eval_at(mi, b, uv, wo=(-0.1, -0.2)) for b in (mapped, number))
+        assert want.max() > 0
+        assert np.allclose(got, want, rtol=1e-3, atol=1e-6 * want.max()), (uv, got, want)
+        values.append(got)
+    assert not np.allclose(values[0], values[1], rtol=0.05)   # the depth matters here
+
+
+def test_height_map_is_refused_where_it_cannot_go():
+    mi = stam_mitsuba.setup('llvm_ad_rgb')
+    with pytest.raises(Exception) as e:
+        mi.load_dict({'type': 'diffraction', 'surface': 'periodic', 'period_um': 1.2,
+                      'coherence_um': 6.0, 'profile': 'sine',
+                      'height_um': {'type': 'uniform', 'value': 0.1}})
+    assert "'height_um' takes a texture only with the rect profile" in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_height_map_values_are_differentiable(variant):
+    """d(mean of a render)/d(the map's value) against a central difference,
+    with the same samples (tests/test_gradients.py's method)."""
+    mi = stam_mitsuba.setup(variant)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import test_gradients as tg
+    bsdf = {**tg.RECT, 'type': 'diffraction', 'height_um': {'type': 'uniform', 'value': 0.15}}
+    scene = mi.load_dict(tg.scene_dict(bsdf))
+    params = mi.traverse(scene)
+    key = 'plate.bsdf.height_um.value'
+    assert key in params and params.flags(key) & mi.ParamFlags.NonDifferentiable.value == 0
+    h, values = 0.004, []
+    for x in (0.15 + h, 0.15 - h):
+        params[key] = mi.Float(x)
+        params.update()
+        values.append(tg.mean_of(scene))
+    fd = (values[0] - values[1]) / (2 * h)
+    v = mi.Float(0.15)
     dr.enable_grad(v)
     params[key] = v
     params.update()

@@ -71,6 +71,36 @@ const CASES: [(Case, &[ParamId]); 3] = [
     ),
 ];
 
+/// The RGB program: the rect profile's height and width (the period, the
+/// coherence length and a sine profile's height stay constants there);
+/// against the native RGB path within the rule's error, as
+/// optics/param_tests.rs holds gratings.
+const PERIODIC_RGB: Tolerances = Tolerances {
+    vs_native: 5e-3,
+    derivative_floor: 1e-8,
+    ..TOLERANCES
+};
+
+#[test]
+fn periodic_rgb_profile_parameters_follow_the_changed_material() {
+    let mut failures = Vec::new();
+    for (case, ids) in CASES {
+        let profile: Vec<ParamId> = ids
+            .iter()
+            .copied()
+            .filter(|id| matches!(id, HeightUm | WidthUm) && !case.name.starts_with("sine"))
+            .collect();
+        failures.extend(check(
+            &case,
+            &[ProgramKind::EvalRgb],
+            &profile,
+            PERIODIC_RGB,
+            2000,
+        ));
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
 #[test]
 fn periodic_parameters_follow_the_changed_material() {
     let mut failures = Vec::new();

@@ -337,7 +337,7 @@ impl PeriodicSurface {
 /// is the built one, so a height raised by a few percent reads its last
 /// row where |beta| is within that of the band's bluest retro-reflection).
 #[derive(Clone, Copy)]
-enum ProfileProgram<'a> {
+pub(super) enum ProfileProgram<'a> {
     Rect {
         height: Value<'a>,
         fill: Value<'a>,
@@ -347,7 +347,7 @@ enum ProfileProgram<'a> {
 }
 
 impl<'a> ProfileProgram<'a> {
-    fn scaled_beta(&self, beta: Value<'a>) -> Value<'a> {
+    pub(super) fn scaled_beta(&self, beta: Value<'a>) -> Value<'a> {
         match self {
             ProfileProgram::Scaled(Some(f)) => (beta * *f).max(-BETA_MAX),
             _ => beta,
@@ -358,7 +358,12 @@ impl<'a> ProfileProgram<'a> {
 /// |c_n|^2 of the rect profile (`PowerProgram::power`'s closed form) with
 /// its height and fill as values: 1 - 4 f (1 - f) s^2 for order 0, 4 f^2
 /// s^2 sinc^2(pi n f) for the others, s = sin(beta h / 2).
-fn rect_power<'a>(beta: Value<'a>, height: Value<'a>, fill: Value<'a>, n: Value<'a>) -> Value<'a> {
+pub(super) fn rect_power<'a>(
+    beta: Value<'a>,
+    height: Value<'a>,
+    fill: Value<'a>,
+    n: Value<'a>,
+) -> Value<'a> {
     let s = (beta * height * 0.5).sin();
     let s2 = s * s;
     let zero = (1.0 - s2 * (fill * (1.0 - fill)) * 4.0).max(0.0);
@@ -372,7 +377,11 @@ fn rect_power<'a>(beta: Value<'a>, height: Value<'a>, fill: Value<'a>, n: Value<
 }
 
 impl PeriodicSurface {
-    fn profile_program<'a>(&self, b: &'a Builder, period: Value<'a>) -> ProfileProgram<'a> {
+    pub(super) fn profile_program<'a>(
+        &self,
+        b: &'a Builder,
+        period: Value<'a>,
+    ) -> ProfileProgram<'a> {
         match self.profile {
             Profile::Rect {
                 height_um,

@@ -1,0 +1,170 @@
+/* param_textures.h: textures on the diffraction plugin's material
+ * parameters (diffraction.cpp), in the JIT variants: a Gaussian surface's
+ * `sigma_um` (scratch and wear maps) and a rect profile's `height_um` (a
+ * compact disc whose groove depth varies). The core's programs read these
+ * parameters (`Op::Param`) and are built for every value up to the
+ * texture's largest (a Gaussian's `sigma_um_max`; a rect profile's powers
+ * are a closed form in the height); this header gives each lane the
+ * texture's value there. The twist map is diffraction.cpp's (a frame
+ * rotation, every variant). No physics.
+ */
+#pragma once
+
+#include <mitsuba/core/properties.h>
+#include <mitsuba/render/interaction.h>
+#include <mitsuba/render/texture.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "../rust-core/include/stam.h"
+#include "plugin_params.h"
+
+NAMESPACE_BEGIN(mitsuba)
+NAMESPACE_BEGIN(diffraction_detail)
+
+template <typename Float, typename Spectrum> struct ParamTextures {
+    MI_IMPORT_TYPES(Texture)
+    using Param = PluginParam<Float>;
+
+    /// One textured parameter: its name, STAM_PARAM_* id, texture, and the
+    /// range its values are clamped into.
+    struct Entry {
+        std::string name;
+        uint32_t id;
+        ref<Texture> texture;
+        ScalarFloat floor = 0.f, max = 0.f;
+    };
+    std::vector<Entry> entries;
+
+    /// Takes the property `name` when it is a texture on a parameter that
+    /// can have one (false: not one of those).
+    bool take(const Properties &props, const std::string &name) {
+        uint32_t id = name == "sigma_um" ? STAM_PARAM_SIGMA_UM
+                      : name == "height_um" ? STAM_PARAM_HEIGHT_UM
+                                            : STAM_PARAMS;
+        if (id == STAM_PARAMS)
+            return false;
+        // sigma: 1e-6 um (a mirror) for zero, negative and NaN values
+        entries.push_back({ name, id, props.get_unbounded_texture<Texture>(name),
+                            id == STAM_PARAM_SIGMA_UM ? 1e-6f : 0.f, 0.f });
+        return true;
+    }
+
+    bool owns(const std::string &key) const {
+        return std::any_of(entries.begin(), entries.end(),
+                           [&](const Entry &e) { return e.name == key; });
+    }
+
+    /// Checks where each texture may go and adds the core's parameters: the
+    /// texture's mean as the parameter (where one value is needed: the
+    /// sampling's constants) and, for sigma, its largest value as
+    /// `sigma_um_max` (unless given), which the programs are built for.
+    void attach(std::vector<Param> &params) {
+        for (Entry &e : entries) {
+            if constexpr (!dr::is_jit_v<Float>) {
+                throw ParamError("parameter '" + e.name + "' takes a texture only in the JIT "
+                                 "variants (llvm_ad_*, cuda_ad_*); in the scalar variants give "
+                                 "a number");
+            } else {
+                std::string surface = text_of(params, "surface"),
+                            profile = text_of(params, "profile");
+                double max_um;
+                if (e.id == STAM_PARAM_SIGMA_UM) {
+                    if (surface != "gaussian")
+                        throw ParamError("parameter 'sigma_um' takes a texture only on surface "
+                                         "\"gaussian\"; other surfaces take a number");
+                    auto given = find(params, "sigma_um_max");
+                    max_um = given != params.end() ? given->given : (double) largest(e);
+                    if (given == params.end())
+                        params.push_back(number("sigma_um_max", max_um, -1));
+                } else {
+                    bool rect = profile == "rect" || (surface == "cd" && profile.empty());
+                    if (!rect)
+                        throw ParamError("parameter 'height_um' takes a texture only with the "
+                                         "rect profile (surface \"cd\", or \"periodic\" with "
+                                         "profile \"rect\")");
+                    max_um = (double) largest(e);
+                }
+                if (!(max_um > 0.0))
+                    throw ParamError("parameter '" + e.name + "': the texture's largest value is " +
+                                     std::to_string(max_um) + "; it must be positive somewhere");
+                // sigma: what the programs are built for; a rect's height:
+                // the core's upper bound (its powers are a closed form)
+                e.max = e.id == STAM_PARAM_SIGMA_UM ? (ScalarFloat) max_um : 100.f;
+                double mean = (double) dr::slice(dr::detach(e.texture->mean()), 0);
+                // (the core wants sigma_um <= sigma_um_max, in double)
+                mean = std::isfinite(mean) && mean > 0.0
+                           ? std::clamp(mean, (double) std::max(e.floor, 1e-6f), max_um)
+                           : max_um;
+                params.push_back(number(e.name.c_str(), mean, (int) e.id));
+            }
+        }
+    }
+
+    void traverse(TraversalCallback *cb) {
+        for (Entry &e : entries)
+            cb->put(e.name, e.texture, ParamFlags::Differentiable);
+    }
+
+    /// Each texture's value per lane, clamped into [floor, max] (NaN: the
+    /// floor), as the programs' per-point parameters
+    template <typename Params>
+    void apply(Params &params, const SurfaceInteraction3f &si, Mask active) const {
+        for (const Entry &e : entries) {
+            Float v = e.texture->eval_1(si, active);
+            params.per_point[e.id] =
+                dr::clip(dr::select(dr::isnan(v), e.floor, v), e.floor, e.max);
+        }
+    }
+
+    void describe(std::ostream &os) const {
+        for (const Entry &e : entries)
+            os << "  " << e.name << " = " << string::indent(e.texture) << "," << std::endl;
+    }
+
+private:
+    static typename std::vector<Param>::iterator find(std::vector<Param> &params,
+                                                      const char *name) {
+        return std::find_if(params.begin(), params.end(),
+                            [&](const Param &p) { return p.name == name; });
+    }
+
+    static std::string text_of(std::vector<Param> &params, const char *name) {
+        auto it = find(params, name);
+        return it == params.end() ? std::string() : it->text;
+    }
+
+    static Param number(const char *name, double v, int id) {
+        Param p;
+        p.name = name;
+        p.kind = Param::Number;
+        p.given = v;
+        p.value = (ScalarFloat) v;
+        p.diff = Float(p.value);
+        p.id = id;
+        p.from_texture = true;
+        return p;
+    }
+
+    /// The texture's largest value: at every texel centre of a bitmap
+    /// (where a bilinear filter's maximum lies; up to 2048 per axis), on a
+    /// 256 x 256 grid for other textures.
+    static ScalarFloat largest(const Entry &e) {
+        ScalarVector2i res = e.texture->resolution();
+        auto axis = [](int r) { return (uint32_t) (r > 1 ? std::min(r, 2048) : 256); };
+        uint32_t nx = axis(res.x()), ny = axis(res.y());
+        UInt32 idx = dr::arange<UInt32>(nx * ny);
+        SurfaceInteraction3f si = dr::zeros<SurfaceInteraction3f>(nx * ny);
+        si.uv = Point2f((Float(idx % nx) + .5f) / (ScalarFloat) nx,
+                        (Float(idx / nx) + .5f) / (ScalarFloat) ny);
+        Float v = dr::detach(e.texture->eval_1(si, true));
+        v = dr::select(dr::isfinite(v), v, 0.f);
+        return dr::slice(dr::max(v), 0);
+    }
+};
+
+NAMESPACE_END(diffraction_detail)
+NAMESPACE_END(mitsuba)
