@@ -310,15 +310,22 @@ impl PeriodicSurface {
             ProfileProgram::Rect { .. } => None,
             ProfileProgram::Scaled(_) => Some(powers.at(b, profile.scaled_beta(beta))),
         };
+        // The rect profile's s^2: one beta for every order
+        let s2 = match profile {
+            ProfileProgram::Rect { height, .. } => Some(rect_s2(beta, height)),
+            ProfileProgram::Scaled(_) => None,
+        };
         let mut sum = b.c(0.0);
         for i in 0..self.max_orders_near() {
             let n = lo + i as f64;
             let d = (n.fma(-lambda_nm, p) + p_err) * inv_lambda * a;
             let e = d.fma(d, e_v);
-            let power = match (profile, &at) {
-                (ProfileProgram::Rect { height, fill }, _) => rect_power(beta, height, fill, n),
-                (_, Some(at)) => powers.power(b, at, n),
-                (_, None) => unreachable!("the powers are prepared for a scaled profile"),
+            let power = match (profile, &at, s2) {
+                (ProfileProgram::Rect { fill, .. }, _, Some(s2)) => {
+                    RectOrder::new(fill, n).power(s2)
+                }
+                (_, Some(at), _) => powers.power(b, at, n),
+                _ => unreachable!("the powers are prepared for the profile"),
             };
             let term = power * (-e).exp();
             let take = n.le(hi) & e.lt(EXP_UNDERFLOW);
@@ -357,23 +364,39 @@ impl<'a> ProfileProgram<'a> {
 
 /// |c_n|^2 of the rect profile (`PowerProgram::power`'s closed form) with
 /// its height and fill as values: 1 - 4 f (1 - f) s^2 for order 0, 4 f^2
-/// s^2 sinc^2(pi n f) for the others, s = sin(beta h / 2).
-pub(super) fn rect_power<'a>(
-    beta: Value<'a>,
-    height: Value<'a>,
-    fill: Value<'a>,
-    n: Value<'a>,
-) -> Value<'a> {
+/// s^2 sinc^2(pi n f) for the others, s = sin(beta h / 2). The order's
+/// part (`RectOrder::new`) and the beta's (`rect_s2`) are computed apart,
+/// so that a loop over orders at one beta, or over betas for one order,
+/// computes each once.
+#[derive(Clone, Copy)]
+pub(super) struct RectOrder<'a> {
+    order0: Mask<'a>,
+    /// Order 0: 4 f (1 - f); the others: 4 f^2 sinc^2(pi n f).
+    c: Value<'a>,
+}
+
+impl<'a> RectOrder<'a> {
+    pub(super) fn new(fill: Value<'a>, n: Value<'a>) -> RectOrder<'a> {
+        // x is never 0 where it is used (and a safe 1 at order 0, whose
+        // unselected branch would otherwise give NaN derivatives)
+        let order0 = n.eq(0.0);
+        let x = order0.select(1.0, n.abs() * fill * PI);
+        let sinc = x.sin() / x;
+        let c = order0.select(fill * (1.0 - fill), fill * fill * (sinc * sinc)) * 4.0;
+        RectOrder { order0, c }
+    }
+
+    /// |c_n|^2 at s^2 = sin^2(beta h / 2) (`rect_s2`)
+    pub(super) fn power(&self, s2: Value<'a>) -> Value<'a> {
+        self.order0
+            .select((1.0 - s2 * self.c).max(0.0), s2 * self.c)
+    }
+}
+
+/// sin^2(beta h / 2)
+pub(super) fn rect_s2<'a>(beta: Value<'a>, height: Value<'a>) -> Value<'a> {
     let s = (beta * height * 0.5).sin();
-    let s2 = s * s;
-    let zero = (1.0 - s2 * (fill * (1.0 - fill)) * 4.0).max(0.0);
-    // x is never 0 where it is used (and a safe 1 at order 0, whose
-    // unselected branch would otherwise give NaN derivatives)
-    let order0 = n.eq(0.0);
-    let x = order0.select(1.0, n.abs() * fill * PI);
-    let sinc = x.sin() / x;
-    let other = s2 * (fill * fill) * (sinc * sinc) * 4.0;
-    order0.select(zero, other)
+    s * s
 }
 
 impl PeriodicSurface {

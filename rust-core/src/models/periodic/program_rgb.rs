@@ -29,7 +29,7 @@
 //! `Shading::pair_factor`: at each order's three fit nodes and at the
 //! broad rule's nodes.
 
-use super::program::{rect_power, PowerAt, PowerProgram, ProfileProgram};
+use super::program::{rect_s2, PowerAt, PowerProgram, ProfileProgram, RectOrder};
 use super::{Periodic, PeriodicSurface, RGB_BROAD_SIGMA, RGB_PEAK_HALF_WIDTH_SIGMAS};
 use super::{RGB_SMOOTH_NODES, RGB_TAIL_EXPONENT};
 use crate::models::{FactorProgram, Shading};
@@ -515,9 +515,15 @@ impl Periodic {
             rect @ ProfileProgram::Rect { .. } => rect,
             ProfileProgram::Scaled(_) => ProfileProgram::Scaled(None),
         };
-        let power_rgb = |beta: Value<'a>, n: Value<'a>| match profile {
-            ProfileProgram::Rect { height, fill } => rect_power(beta, height, fill, n),
-            ProfileProgram::Scaled(_) => powers.power_rgb(b, profile.scaled_beta(beta), n),
+        // |c_n|^2 at beta for an order's part prepared once per order
+        let power_rgb =
+            |beta: Value<'a>, n: Value<'a>, rect: Option<RectOrder<'a>>| match (profile, rect) {
+                (ProfileProgram::Rect { height, .. }, Some(r)) => r.power(rect_s2(beta, height)),
+                _ => powers.power_rgb(b, profile.scaled_beta(beta), n),
+            };
+        let rect_order = |n: Value<'a>| match profile {
+            ProfileProgram::Rect { fill, .. } => Some(RectOrder::new(fill, n)),
+            ProfileProgram::Scaled(_) => None,
         };
         let (u, v, w) = (pair.u, pair.v, pair.w);
         let (l, lam) = (p.coherence_um, p.period_um);
@@ -582,9 +588,10 @@ impl Periodic {
             let bb = (mu + r).min(NU_HI);
             let delta = (s * 3f64.sqrt()).min((bb - a) * 0.5).max(1e-9);
             let c = mu.max(a + delta).min(bb - delta);
+            let rect = rect_order(n);
             let s_at = |nu: Value<'a>| {
                 let beta = nu * w * (2.0 * PI);
-                refl_at(nu) * nu * nu * power_rgb(beta, n)
+                refl_at(nu) * nu * nu * power_rgb(beta, n, rect)
             };
             let (sm, s0, sp) = (s_at(c - delta), s_at(c), s_at(c + delta));
             let inv_2d = 0.5 / delta;
@@ -606,27 +613,28 @@ impl Periodic {
         }
 
         // Broad peaks: the 32-node rule over orders -broad..=broad.
-        let orders: Vec<(f64, Mask<'a>)> = (-plan.broad..=plan.broad)
-            .map(|n| (n as f64, peak(b.c(n as f64)).take))
+        let orders: Vec<(f64, Mask<'a>, Option<RectOrder<'a>>)> = (-plan.broad..=plan.broad)
+            .map(|n| {
+                let nv = b.c(n as f64);
+                (n as f64, peak(nv).take, rect_order(nv))
+            })
             .collect();
         let mut broad_sum = [b.c(0.0); 3];
         for (j, (&nu, weights)) in rule.nu_per_um.iter().zip(&rule.weights).enumerate() {
             let beta = w * (2.0 * PI * nu);
-            let at: Option<PowerAt> = match profile {
-                ProfileProgram::Rect { .. } => None,
-                ProfileProgram::Scaled(_) => Some(powers.at(b, profile.scaled_beta(beta))),
+            let (at, s2): (Option<PowerAt>, _) = match profile {
+                ProfileProgram::Rect { height, .. } => (None, Some(rect_s2(beta, height))),
+                ProfileProgram::Scaled(_) => (Some(powers.at(b, profile.scaled_beta(beta))), None),
             };
             let ev = (v * (two_pi_l * nu)).sq();
             let mut sum = b.c(0.0);
-            for &(n, take) in &orders {
+            for &(n, take, rect) in &orders {
                 let d = (u * nu - n / lam) * two_pi_l;
                 let e = d.fma(d, ev);
-                let power = match (profile, &at) {
-                    (ProfileProgram::Rect { height, fill }, _) => {
-                        rect_power(beta, height, fill, b.c(n))
-                    }
-                    (_, Some(at)) => powers.power_const(b, at, n as i64),
-                    (_, None) => unreachable!("the powers are prepared for a scaled profile"),
+                let power = match (rect, s2, &at) {
+                    (Some(r), Some(s2), _) => r.power(s2),
+                    (_, _, Some(at)) => powers.power_const(b, at, n as i64),
+                    _ => unreachable!("the powers are prepared for the profile"),
                 };
                 let term = power * (-e).exp();
                 sum = sum + (take & e.lt(700.0)).select(term, 0.0);
