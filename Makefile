@@ -127,8 +127,12 @@ lint:
 test-rust:
 	$(CARGO) test --workspace
 
+# Two (or more) pytest workers (pytest-xdist): a clean checkout compiles its
+# Dr.Jit kernels (.drjit-cache) on the first run, one core per process. Each
+# file runs in one worker (--dist loadfile): test_wheel.py builds dist/ and
+# test_animation.py starts a Dask cluster in module fixtures.
 test-python: plugin render-tool
-	$(PYTHON) -m pytest -q tests
+	$(PYTHON) -m pytest -q -n auto --dist loadfile tests
 
 # Everything, in the order that fails fastest.
 test: setup lint test-rust test-python
