@@ -78,35 +78,6 @@ def test_a_texture_elsewhere_is_refused_by_name(variant):
     assert "'corr_x_um' cannot take a texture" in str(e.value), str(e.value)
 
 
-@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
-def test_twist_map_values_are_differentiable(variant):
-    """d(mean of a render)/d(the map's value) against a central difference,
-    with the same samples (tests/test_gradients.py's method)."""
-    mi = stam_mitsuba.setup(variant)
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    import test_gradients as tg
-    bsdf = {**BRUSHED, 'twist': {'type': 'uniform', 'value': 25.0}}
-    scene = mi.load_dict(tg.scene_dict(bsdf))
-    params = mi.traverse(scene)
-    key = 'plate.bsdf.twist.value'
-    assert key in params and params.flags(key) & mi.ParamFlags.NonDifferentiable.value == 0
-    h, values = 2.0, []
-    for x in (25.0 + h, 25.0 - h):
-        params[key] = mi.Float(x)
-        params.update()
-        values.append(tg.mean_of(scene))
-    fd = (values[0] - values[1]) / (2 * h)
-    v = mi.Float(25.0)
-    dr.enable_grad(v)
-    params[key] = v
-    params.update()
-    img = mi.render(scene, params=params, seed=1, seed_grad=tg.SEED, spp=16)
-    dr.backward(dr.mean(img, axis=None))
-    ad = float(dr.grad(v)[0])
-    assert abs(fd) > 1e-4 * max(values)
-    assert abs(ad - fd) <= tg.GRADIENT_TOL * abs(fd), (ad, fd)
-
-
 SMOOTH_TO_ROUGH = [[0.02, 0.3], [0.1, 0.5]]   # sigma_um per texel (um)
 
 
@@ -199,36 +170,6 @@ def test_sigma_map_bad_values_give_finite_results(variant):
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
-def test_sigma_map_values_are_differentiable(variant):
-    """d(mean of a render)/d(the map's value) against a central difference,
-    with the same samples (tests/test_gradients.py's method)."""
-    mi = stam_mitsuba.setup(variant)
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    import test_gradients as tg
-    bsdf = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9,
-            'sigma_um_max': 0.2, 'sigma_um': {'type': 'uniform', 'value': 0.1}}
-    scene = mi.load_dict(tg.scene_dict(bsdf))
-    params = mi.traverse(scene)
-    key = 'plate.bsdf.sigma_um.value'
-    assert key in params and params.flags(key) & mi.ParamFlags.NonDifferentiable.value == 0
-    h, values = 0.002, []
-    for x in (0.1 + h, 0.1 - h):
-        params[key] = mi.Float(x)
-        params.update()
-        values.append(tg.mean_of(scene))
-    fd = (values[0] - values[1]) / (2 * h)
-    v = mi.Float(0.1)
-    dr.enable_grad(v)
-    params[key] = v
-    params.update()
-    img = mi.render(scene, params=params, seed=1, seed_grad=tg.SEED, spp=16)
-    dr.backward(dr.mean(img, axis=None))
-    ad = float(dr.grad(v)[0])
-    assert abs(fd) > 1e-4 * max(values)
-    assert abs(ad - fd) <= tg.GRADIENT_TOL * abs(fd), (ad, fd)
-
-
-@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 def test_height_map_gives_each_point_its_groove_depth(variant):
     """A compact disc whose bump height is a texture (a 2 x 2 map of 0.08 to
     0.2 um): at each texel the disc with that height as a number."""
@@ -258,29 +199,19 @@ def test_height_map_is_refused_where_it_cannot_go():
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
-def test_height_map_values_are_differentiable(variant):
-    """d(mean of a render)/d(the map's value) against a central difference,
-    with the same samples (tests/test_gradients.py's method)."""
-    mi = stam_mitsuba.setup(variant)
+@pytest.mark.parametrize('key,bsdf,step', [
+    ('twist.value', {**BRUSHED, 'twist': {'type': 'uniform', 'value': 25.0}}, 2.0),
+    ('sigma_um.value', {'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9,
+                        'sigma_um_max': 0.2, 'sigma_um': {'type': 'uniform', 'value': 0.1}},
+     0.002),
+    ('height_um.value', {'surface': 'periodic', 'period_um': 1.2, 'profile': 'rect',
+                         'width_um': 0.4, 'coherence_um': 6.0, 'fresnel': 0.9,
+                         'height_um': {'type': 'uniform', 'value': 0.15}}, 0.004),
+])
+def test_map_values_are_differentiable(variant, key, bsdf, step):
+    """d(mean of a render)/d(a map's value) against a central difference,
+    with the same samples (tests/test_gradients.py's method): the twist,
+    sigma and height maps (mi.traverse: <parameter>.<the texture's>)."""
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import test_gradients as tg
-    bsdf = {**tg.RECT, 'type': 'diffraction', 'height_um': {'type': 'uniform', 'value': 0.15}}
-    scene = mi.load_dict(tg.scene_dict(bsdf))
-    params = mi.traverse(scene)
-    key = 'plate.bsdf.height_um.value'
-    assert key in params and params.flags(key) & mi.ParamFlags.NonDifferentiable.value == 0
-    h, values = 0.004, []
-    for x in (0.15 + h, 0.15 - h):
-        params[key] = mi.Float(x)
-        params.update()
-        values.append(tg.mean_of(scene))
-    fd = (values[0] - values[1]) / (2 * h)
-    v = mi.Float(0.15)
-    dr.enable_grad(v)
-    params[key] = v
-    params.update()
-    img = mi.render(scene, params=params, seed=1, seed_grad=tg.SEED, spp=16)
-    dr.backward(dr.mean(img, axis=None))
-    ad = float(dr.grad(v)[0])
-    assert abs(fd) > 1e-4 * max(values)
-    assert abs(ad - fd) <= tg.GRADIENT_TOL * abs(fd), (ad, fd)
+    tg.assert_gradient(variant, key, {k: v for k, v in bsdf.items() if k != 'type'}, step)
