@@ -280,9 +280,19 @@ def test_chi2_of_the_jit_sampling(variant, surface, cos_i):
 SCENES_DIR = os.path.join(ROOT, 'scenes')
 
 
+@pytest.fixture(scope='module')
+def studio():
+    """The hero scenes' studio environment and label (out/env/, written
+    atomically by scripts/studio_env.py if missing), which no other test
+    need have made first."""
+    sys.path.insert(0, os.path.join(ROOT, 'scripts'))
+    import studio_env
+    return studio_env.write(os.path.join(ROOT, 'out', 'env'))
+
+
 @pytest.mark.parametrize('variant', [None, 'llvm_ad_spectral'])
 @pytest.mark.parametrize('scene', sorted(f for f in os.listdir(SCENES_DIR) if f.endswith('.xml')))
-def test_mitsuba_command_renders_the_scene(scene, variant, tmp_path):
+def test_mitsuba_command_renders_the_scene(scene, variant, tmp_path, studio):
     """`mitsuba` with its default variant (None: llvm_ad_rgb where LLVM is
     present) and with llvm_ad_spectral, Dr.Jit's default flags."""
     path = os.path.join(SCENES_DIR, scene)
