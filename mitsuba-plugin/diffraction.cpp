@@ -346,14 +346,7 @@ public:
                     m_center_v = (ScalarFloat) it->template get<double>();
                     has_center = true;
                 } else if (type == PType::Float || type == PType::Integer) {
-                    double v = it->template get<double>();
-                    Param p;
-                    p.name = name;
-                    p.kind = Param::Number;
-                    p.given = v;
-                    p.value = (ScalarFloat) v;
-                    p.diff = Float(p.value);
-                    p.id = param_id(name);
+                    Param p = Param::number(name, it->template get<double>(), param_id(name));
                     // eta, k: nested under "fresnel"
                     if (name == "eta" || name == "k")
                         p.group = "fresnel";

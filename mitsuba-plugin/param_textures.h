@@ -138,13 +138,7 @@ private:
     }
 
     static Param number(const char *name, double v, int id) {
-        Param p;
-        p.name = name;
-        p.kind = Param::Number;
-        p.given = v;
-        p.value = (ScalarFloat) v;
-        p.diff = Float(p.value);
-        p.id = id;
+        Param p = Param::number(name, v, id);
         p.from_texture = true;
         return p;
     }

@@ -39,6 +39,18 @@ template <typename Float> struct PluginParam {
     /// the registered type that carries it through mi.traverse (which has
     /// no strings)
     Properties holder;
+
+    /// A number given as `v`, forwarded under `name` (STAM_PARAM_* `id`)
+    static PluginParam number(const std::string &name, double v, int id) {
+        PluginParam p;
+        p.name = name;
+        p.kind = Number;
+        p.given = v;
+        p.value = (ScalarFloat) v;
+        p.diff = Float(p.value);
+        p.id = id;
+        return p;
+    }
 };
 
 /// The STAM_PARAM_* id of a numeric parameter's name, -1 for none

@@ -27,6 +27,7 @@ from test_jit import (  # noqa: E402  (the shared helpers; importing sets up the
     CHI2_SURFACES, JIT_VARIANTS, ROOT, SURFACES, WAVELENGTHS, make_si, programs, report,
     symbolic, to_np, use)
 import stam_materials  # noqa: E402
+from test_plugin import density_adapter, glossy_ctx  # noqa: E402
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 
@@ -219,32 +220,6 @@ def test_every_material_runs_in_symbolic_mode(variant):
 # chi-square test of the JIT sampling
 # ---------------------------------------------------------------------------
 
-def density_adapter(bsdf, wi, ctx, wavelengths=None):
-    """As mi.chi2.BSDFAdapter, through a symbolic call, with non-zero
-    wavelengths (spectral), counting every glossy sample of pdf > 0 (the
-    stock adapter drops zero-weight ones, which the pdf includes)."""
-    ptr = symbolic(bsdf)
-
-    def make_si_n(n):
-        si = dr.zeros(mi.SurfaceInteraction3f, n)
-        si.wi = wi
-        si.uv = [0.5, 0.5]
-        if wavelengths is not None:
-            si.wavelengths = list(wavelengths)
-        return si
-
-    def sample_functor(sample, *args):
-        n = dr.width(sample)
-        bs, weight = ptr.sample(ctx, make_si_n(n), sample[0], mi.Vector2f([sample[1], sample[2]]))
-        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-        return bs.wo, dr.select((bs.pdf > 0) & ~delta, 1.0, 0.0)
-
-    def pdf_functor(wo, *args):
-        return ptr.pdf(ctx, make_si_n(dr.width(wo)), wo)
-
-    return sample_functor, pdf_functor
-
-
 CHI2_COS = (1.0, 0.5, 0.1)
 CHI2_IRES = {'gaussian': 8, 'fractal': 8, 'periodic': 32}
 
@@ -258,9 +233,9 @@ def test_chi2_of_the_jit_sampling(variant, surface, cos_i):
     programs(params, variant)
     bsdf = mi.load_dict({'type': 'diffraction', **stam_materials.plugin_params(params)})
     wi = [math.sqrt(1 - cos_i * cos_i), 0.0, cos_i]
-    ctx = mi.BSDFContext()
-    ctx.type_mask = +mi.BSDFFlags.GlossyReflection   # the delta lobe has no density
-    sample, pdf = density_adapter(bsdf, wi, ctx, WAVELENGTHS if mi.is_spectral else None)
+    # test_plugin's adapter, through a symbolic call (as a render makes it)
+    sample, pdf = density_adapter(symbolic(bsdf), wi, glossy_ctx(),
+                                  WAVELENGTHS if mi.is_spectral else None)
     # Gratings' peaks are narrower than the smooth models' lobes: their pdf
     # is integrated over each cell with more points (CHI2_IRES)
     chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample,
