@@ -176,6 +176,9 @@ impl SurfaceModel for Periodic {
             wavelength_nodes: 25,
             per_wavelength: true,
             horizon_taper_cos: 0.25,
+            // A grating's excess is real (its orders' albedo), not noise,
+            // and its 25 nodes make samples expensive.
+            samples_per_cell: 512,
         }
     }
 
