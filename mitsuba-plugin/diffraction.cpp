@@ -134,11 +134,12 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed|
  * - energy
    - |string|
-   - ``stam``: the paper's formula, which near grazing directions can
-     reflect more light than it receives; ``conserving``: f scaled by
-     m(wi, lambda) m(wo, lambda) so that no direction does (reciprocal; the
-     table is built from the material on its first use, 0.03-1 s;
-     ``docs/energy.md``). (Default: ``stam``)
+   - ``conserving``: Stam's f scaled by m(wi, lambda) m(wo, lambda) so
+     that no direction reflects more light than it receives (reciprocal;
+     the table is built from the material on its first use, 0.1-0.4 s;
+     ``docs/energy.md``); ``stam``: the paper's formula, which near grazing
+     directions can reflect several times what it receives. (Default:
+     ``conserving``; ``stam`` with a ``sigma_um`` texture)
    - |exposed| (a string)
  * - series_tolerance
    - |float|

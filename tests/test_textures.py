@@ -94,7 +94,10 @@ def test_sigma_map_gives_each_point_its_sigma(variant, fresnel):
     the one with that sigma as a number (the programs are built for every
     sigma up to 0.5; the sampling follows the point's sigma)."""
     mi = stam_mitsuba.setup(variant)
-    base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': fresnel}
+    # Stam's formula: a sigma texture's default; the numbers' default
+    # (energy conserving) has a table per sigma
+    base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': fresnel,
+            'energy': 'stam'}
     mapped = mi.load_dict({**base, 'sigma_um': sigma_map(mi, SMOOTH_TO_ROUGH)})
     assert 'sigma_um_max = 0.5 (from the texture)' in str(mapped)
     values = []
@@ -158,7 +161,8 @@ def test_sigma_map_bad_values_give_finite_results(variant):
     """Negative, zero and NaN values read as the smoothest sigma (1e-6 um);
     values above the given sigma_um_max as that maximum."""
     mi = stam_mitsuba.setup(variant)
-    base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9}
+    base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9,
+            'energy': 'stam'}
     bad = mi.load_dict({**base, 'sigma_um_max': 0.2,
                         'sigma_um': sigma_map(mi, [[-0.3, 0.0], [float('nan'), 0.9]])})
     for uv in ((0.25, 0.25), (0.75, 0.25), (0.25, 0.75)):
@@ -175,7 +179,10 @@ def test_height_map_gives_each_point_its_groove_depth(variant):
     0.2 um): at each texel the disc with that height as a number."""
     mi = stam_mitsuba.setup(variant)
     heights = [[0.08, 0.2], [0.15, 0.11]]
-    base = {'type': 'diffraction', 'surface': 'cd', 'coherence_um': 10.0, 'fresnel': 0.9}
+    # Stam's formula: the default energy table is built for one height
+    # (the texture's mean), the numbers' each for its own
+    base = {'type': 'diffraction', 'surface': 'cd', 'coherence_um': 10.0, 'fresnel': 0.9,
+            'energy': 'stam'}
     mapped = mi.load_dict({**base, 'height_um': sigma_map(mi, heights)})
     values = []
     for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),

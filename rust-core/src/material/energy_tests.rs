@@ -1,7 +1,7 @@
 //! Tests of the energy-conserving material ("energy": "conserving"): the white furnace (directional
 //! albedo of a white material at most 1 within its Monte Carlo error, for
 //! every model, spectral and RGB luminance, down to grazing incidence),
-//! reciprocity, and Stam's formula where the parameter asks for it.
+//! reciprocity, the default, and Stam's formula where the parameter asks for it.
 
 use super::*;
 use crate::sampling::SplitMix64;
@@ -128,21 +128,46 @@ fn conserving_is_reciprocal() {
     println!("reciprocity: worst relative difference {worst:.1e}");
 }
 
-/// Stam's formula is the default and has no table; the conserving
-/// material's table is built lazily and counted in its memory; a bad value
-/// is refused by name.
+/// The conserving material is the default and builds its table lazily
+/// (counted in its memory); `"energy": "stam"` has no table; a sigma
+/// texture's material (no one sigma to build a table for) defaults to
+/// Stam's formula and refuses "conserving" by name; a bad value is refused
+/// by name.
 #[test]
-fn stam_mode_is_the_default() {
-    let stam = Brdf::from_json(r#"{"surface":"cd"}"#).unwrap();
-    assert!(stam.energy_table().is_none());
-    let brdf = Brdf::from_json(r#"{"surface":"cd","energy":"conserving"}"#).unwrap();
+fn conserving_is_the_default() {
+    let brdf = Brdf::from_json(r#"{"surface":"cd"}"#).unwrap();
     let before = brdf.memory_bytes();
     let table = brdf.energy_table().unwrap();
     assert_eq!(brdf.memory_bytes(), before + table.memory_bytes());
+    let stam = Brdf::from_json(r#"{"surface":"cd","energy":"stam"}"#).unwrap();
+    assert!(stam.energy_table().is_none());
+    let textured = r#"{"surface":"gaussian","sigma_um":0.1,"sigma_um_max":0.4,"corr_um":2}"#;
+    assert!(Brdf::from_json(textured).unwrap().energy_table().is_none());
+    let e = Brdf::from_json(&textured.replace('}', r#","energy":"conserving"}"#))
+        .err()
+        .unwrap();
+    assert!(e.message.contains("'sigma_um_max'"), "{}", e.message);
     let e = Brdf::from_json(r#"{"surface":"cd","energy":"loud"}"#)
         .err()
         .unwrap();
     assert!(e.message.contains("'energy'"), "{}", e.message);
+}
+
+/// Materials with equal surface parameters share one table (built once per
+/// process), whatever their Fresnel term.
+#[test]
+fn equal_surfaces_share_their_table() {
+    let json = r#"{"surface":"gaussian","sigma_um":0.21,"corr_um":1.7}"#;
+    let a = Brdf::from_json(json).unwrap();
+    let b = Brdf::from_json(&json.replace('}', r#","fresnel":"gold"}"#)).unwrap();
+    let c = Brdf::from_json(&json.replace("0.21", "0.22")).unwrap();
+    let (ta, tb, tc) = (
+        a.energy_table().unwrap(),
+        b.energy_table().unwrap(),
+        c.energy_table().unwrap(),
+    );
+    assert!(std::ptr::eq(ta, tb));
+    assert!(!std::ptr::eq(ta, tc));
 }
 
 /// The table as a program (EnergyTable::pair_program, what the JIT path

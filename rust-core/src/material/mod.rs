@@ -38,7 +38,8 @@ use crate::spectrum::{self, gamut_map, in_band};
 use energy::{EnergyMode, EnergyTable, PairEnergy};
 use glam::DVec3;
 use params::MaterialParams;
-use std::sync::OnceLock;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
 
 pub struct Brdf {
     surface: Surface,
@@ -54,7 +55,39 @@ pub struct Brdf {
 /// What the energy table is built from, and the table once built.
 struct Energy {
     surface: SurfaceParams,
-    table: OnceLock<EnergyTable>,
+    table: OnceLock<Arc<EnergyTable>>,
+}
+
+/// Energy tables built in this process, by their surface parameters (the
+/// table depends on nothing else: it is built from the white twin). A scene
+/// or a test suite often builds one material more than once (the scalar and
+/// JIT paths, a parameter update that comes back), and a table takes
+/// 0.1-0.4 s. At most TABLE_CACHE_ENTRIES are kept (2-60 kB each).
+fn cached_energy_table(
+    surface: &SurfaceParams,
+    build: impl FnOnce() -> EnergyTable,
+) -> Arc<EnergyTable> {
+    const TABLE_CACHE_ENTRIES: usize = 64;
+    static CACHE: OnceLock<Mutex<HashMap<String, Arc<EnergyTable>>>> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    // Debug prints every f64 exactly (shortest round trip), so equal keys
+    // mean equal parameters.
+    let key = format!("{surface:?}");
+    let lock = || {
+        cache
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    };
+    if let Some(table) = lock().get(&key) {
+        return table.clone();
+    }
+    // Built without the lock: another material's table may build meanwhile.
+    let table = Arc::new(build());
+    let mut map = lock();
+    if map.len() >= TABLE_CACHE_ENTRIES {
+        map.clear();
+    }
+    map.entry(key).or_insert(table).clone()
 }
 
 impl Brdf {
@@ -82,19 +115,21 @@ impl Brdf {
     pub fn energy_table(&self) -> Option<&EnergyTable> {
         let energy = self.energy.as_ref()?;
         Some(energy.table.get_or_init(|| {
-            let white = Brdf::new(MaterialParams {
-                surface: energy.surface.clone(),
-                fresnel: Fresnel::Constant(1.0),
-                energy: EnergyMode::Stam,
+            cached_energy_table(&energy.surface, || {
+                let white = Brdf::new(MaterialParams {
+                    surface: energy.surface.clone(),
+                    fresnel: Fresnel::Constant(1.0),
+                    energy: EnergyMode::Stam,
+                })
+                .expect("the white twin of a valid material is valid");
+                let azimuthal = self.flags() & FLAG_ANISOTROPIC != 0;
+                EnergyTable::build(
+                    &white,
+                    azimuthal,
+                    (spectrum::LAMBDA_MIN_NM, spectrum::LAMBDA_MAX_NM),
+                    self.surface.energy_hint(),
+                )
             })
-            .expect("the white twin of a valid material is valid");
-            let azimuthal = self.flags() & FLAG_ANISOTROPIC != 0;
-            EnergyTable::build(
-                &white,
-                azimuthal,
-                (spectrum::LAMBDA_MIN_NM, spectrum::LAMBDA_MAX_NM),
-                self.surface.energy_hint(),
-            )
         }))
     }
 

@@ -29,8 +29,9 @@ const MATERIAL_KEYS: [&str; 3] = ["surface", "fresnel", "energy"];
 pub struct MaterialParams {
     pub surface: SurfaceParams,
     pub fresnel: Fresnel,
-    /// "stam" (default: the paper's formula) or "conserving" (no direction
-    /// reflects more than it receives; docs/energy.md).
+    /// "conserving" (default: no direction reflects more than it receives;
+    /// docs/energy.md) or "stam" (the paper's formula). A sigma texture's
+    /// default is "stam".
     pub energy: EnergyMode,
 }
 
@@ -50,23 +51,26 @@ impl MaterialParams {
         };
         let surface = SurfaceParams::parse(obj, &MATERIAL_KEYS)?;
         let fresnel = parse_fresnel(obj.get("fresnel"))?;
+        // A sigma texture's material has no one sigma to build the energy
+        // table for, so its default is Stam's formula (docs/energy.md).
+        let sigma_texture =
+            matches!(&surface, SurfaceParams::Gaussian(g) if g.sigma_um_max.is_some());
         let energy = match obj.get("energy") {
-            None => EnergyMode::Stam,
+            None if sigma_texture => EnergyMode::Stam,
+            None => EnergyMode::Conserving,
             Some(Value::String(s)) if s == "conserving" => EnergyMode::Conserving,
             Some(Value::String(s)) if s == "stam" => EnergyMode::Stam,
             Some(other) => {
                 return Err(err(format!(
-                    "parameter 'energy' = {other} is not accepted: \"stam\" (default: the paper's formula) or \"conserving\" (no direction reflects more than it receives)"
+                    "parameter 'energy' = {other} is not accepted: \"conserving\" (default: no direction reflects more than it receives) or \"stam\" (the paper's formula)"
                 )))
             }
         };
-        if let (EnergyMode::Conserving, SurfaceParams::Gaussian(g)) = (&energy, &surface) {
-            if g.sigma_um_max.is_some() {
-                // The energy table is built for one sigma.
-                return Err(err(
-                    "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma)".to_string(),
-                ));
-            }
+        if energy == EnergyMode::Conserving && sigma_texture {
+            // The energy table is built for one sigma.
+            return Err(err(
+                "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma); leave 'energy' out or set it to \"stam\"".to_string(),
+            ));
         }
         Ok(MaterialParams {
             surface,

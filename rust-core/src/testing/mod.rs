@@ -7,6 +7,22 @@ pub mod programs;
 
 use glam::DVec3;
 
+/// A material's JSON with `"energy": "stam"` unless it names its energy:
+/// the tests of a model's own formula (its programs against its native
+/// path, its parameters, its tables) test Stam's f, not the default's
+/// energy scaling, which has its own tests (material::energy_tests).
+pub fn stam_formula(json: &str) -> String {
+    let mut value: serde_json::Value =
+        serde_json::from_str(json).unwrap_or_else(|e| panic!("{json}: {e}"));
+    let object = value
+        .as_object_mut()
+        .unwrap_or_else(|| panic!("{json}: not an object"));
+    object
+        .entry("energy")
+        .or_insert_with(|| serde_json::Value::String("stam".into()));
+    value.to_string()
+}
+
 /// Pairs of directions at four incidences, around each one's mirror
 /// direction (where a BRDF's features are) and towards the horizon.
 pub fn directions() -> Vec<(DVec3, DVec3)> {

@@ -42,6 +42,7 @@ impl Case {
             json = json.replace(&key, &format!("{v:?}"));
         }
         assert!(!json.contains('$'), "{}: {json}", self.name);
+        let json = crate::testing::stam_formula(&json);
         Brdf::from_json(&json).unwrap_or_else(|e| panic!("{}: {json}: {e}", self.name))
     }
 }

@@ -15,7 +15,8 @@ use glam::DVec3;
 use std::f64::consts::PI;
 
 fn material(json: &str) -> Brdf {
-    Brdf::from_json(json).unwrap_or_else(|e| panic!("{json}: {}", e.message))
+    let json = crate::testing::stam_formula(json);
+    Brdf::from_json(&json).unwrap_or_else(|e| panic!("{json}: {}", e.message))
 }
 
 /// The fractal materials of tests/materials.json, then a spread of hurst

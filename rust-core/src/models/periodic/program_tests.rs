@@ -53,6 +53,7 @@ pub(super) fn materials() -> Vec<(String, Brdf)> {
     list.extend(shared_materials());
     list.into_iter()
         .map(|(name, json)| {
+            let json = crate::testing::stam_formula(&json);
             let brdf = Brdf::from_json(&json).unwrap_or_else(|e| panic!("{name}: {e}"));
             (name, brdf)
         })
