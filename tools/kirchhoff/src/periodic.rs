@@ -127,10 +127,10 @@ pub fn core_json(case: &PeriodicCase) -> String {
     let (p, l) = (case.period, case.coherence);
     match case.profile {
         ProfileKind::Rect { height, width } => format!(
-            r#"{{"surface":"periodic","period_um":{p},"coherence_um":{l},"profile":"rect","height_um":{height},"width_um":{width},"fresnel":1.0,"energy":"stam"}}"#
+            r#"{{"surface":"periodic","period_um":{p},"coherence_um":{l},"profile":"rect","height_um":{height},"width_um":{width},"fresnel":1.0}}"#
         ),
         ProfileKind::Sine { height } => format!(
-            r#"{{"surface":"periodic","period_um":{p},"coherence_um":{l},"profile":"sine","height_um":{height},"fresnel":1.0,"energy":"stam"}}"#
+            r#"{{"surface":"periodic","period_um":{p},"coherence_um":{l},"profile":"sine","height_um":{height},"fresnel":1.0}}"#
         ),
     }
 }

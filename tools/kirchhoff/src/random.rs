@@ -251,16 +251,16 @@ pub fn core_json(model: &RandomModel) -> String {
         RandomModel::Gaussian { sigma, tx, ty } => {
             if tx == ty {
                 format!(
-                    r#"{{"surface":"gaussian","sigma_um":{sigma},"corr_um":{tx},"fresnel":1.0,"energy":"stam"}}"#
+                    r#"{{"surface":"gaussian","sigma_um":{sigma},"corr_um":{tx},"fresnel":1.0}}"#
                 )
             } else {
                 format!(
-                    r#"{{"surface":"gaussian","sigma_um":{sigma},"corr_x_um":{tx},"corr_y_um":{ty},"fresnel":1.0,"energy":"stam"}}"#
+                    r#"{{"surface":"gaussian","sigma_um":{sigma},"corr_x_um":{tx},"corr_y_um":{ty},"fresnel":1.0}}"#
                 )
             }
         }
         RandomModel::Fbm { hurst, s, lag } => format!(
-            r#"{{"surface":"fractal","hurst":{hurst},"sigma_um":{s},"lag_um":{lag},"fresnel":1.0,"energy":"stam"}}"#
+            r#"{{"surface":"fractal","hurst":{hurst},"sigma_um":{s},"lag_um":{lag},"fresnel":1.0}}"#
         ),
     }
 }
