@@ -139,6 +139,11 @@ fn moderate_change(conserving: &Brdf, stam: &Brdf) -> (f64, f64) {
     (spectral, rgb)
 }
 
+/// The material's JSON with more fields (`extra`: `"key":value` pairs).
+fn with_fields(json: &str, extra: &str) -> String {
+    format!("{},{extra}}}", &json[..json.len() - 1])
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(200_000);
@@ -146,18 +151,14 @@ fn main() {
     println!("| material | table built in | largest change of f where cos_i, cos_o >= 0.5 (table bound; sampled spectral / RGB luminance) | smallest factor m(wi) m(wo) |");
     println!("|---|---|---|---|");
     for (name, json) in MATERIALS {
-        let brdf = Brdf::from_json(&format!(
-            r#"{},"energy":"conserving"}}"#,
-            &json[..json.len() - 1]
-        ))
-        .expect("material");
+        let brdf =
+            Brdf::from_json(&with_fields(json, r#""energy":"conserving""#)).expect("material");
         let t = std::time::Instant::now();
         let table = brdf
             .energy_table()
             .expect("a conserving material has a table");
         let built = t.elapsed().as_secs_f64();
-        let stam = Brdf::from_json(&format!(r#"{},"energy":"stam"}}"#, &json[..json.len() - 1]))
-            .expect("material");
+        let stam = Brdf::from_json(&with_fields(json, r#""energy":"stam""#)).expect("material");
         let (spectral, rgb) = moderate_change(&brdf, &stam);
         let bound = 1.0 - table.min_factor_within(0.5).powi(2);
         println!(
@@ -189,10 +190,7 @@ fn main() {
             );
             println!("|---|{}", "---|".repeat(COSINES.len()));
             for (name, json) in MATERIALS {
-                let json = format!(
-                    r#"{},"fresnel":1,"energy":"{mode}"}}"#,
-                    &json[..json.len() - 1]
-                );
+                let json = with_fields(json, &format!(r#""fresnel":1,"energy":"{mode}""#));
                 let brdf = Brdf::from_json(&json).expect("material");
                 let mut cells = Vec::new();
                 for &c in &COSINES {
