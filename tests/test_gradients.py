@@ -170,7 +170,13 @@ def test_parameters_the_programs_do_not_read_are_not_differentiable(variant):
 def test_gradients_are_finite_for_every_pair(variant):
     """Every differentiable parameter of every test material: the gradient
     of eval is finite at random, grazing and near-mirror pairs (the far
-    tails, where f32 derivatives underflow, included)."""
+    tails, where f32 derivatives underflow, included). One forward pass per
+    material, along all its parameters at once (each parameter is its value
+    plus one shared tangent t): the sum of the derivatives is finite exactly
+    when each one is (a NaN or an infinity stays one in the sum), and the
+    material's kernel compiles once, not once per parameter. Gratings: one
+    material per profile and the compact disc (a grating's RGB kernel takes
+    10-30 s to compile; the others of the list differ only in numbers)."""
     import stam_materials
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import test_jit
@@ -178,20 +184,26 @@ def test_gradients_are_finite_for_every_pair(variant):
     wi, wo = test_jit.direction_pairs(8000, seed=3)
     checked = 0
     for e in stam_materials.load():
+        if e['model'] == 'periodic' and not ({'plugin', 'abi'} & set(e['tags'])):
+            continue
         b = mi_.load_dict({'type': 'diffraction', **stam_materials.plugin_params(e['params'])})
         params = mi_.traverse(b)
-        for key in params.keys():
-            if params.flags(key) & mi_.ParamFlags.NonDifferentiable.value:
-                continue
-            x = mi_.Float(params[key][0])
-            dr.enable_grad(x)
-            params[key] = x
-            params.update()
-            v = b.eval(mi_.BSDFContext(), test_jit.make_si(wi), mi_.Vector3f(wo.T))
-            dr.forward(x)
-            g = np.array(dr.grad(v))
-            assert np.all(np.isfinite(g)), (e['name'], key, int(np.sum(~np.isfinite(g))))
-            params[key] = mi_.Float(float(params[key][0]))
-            params.update()
-            checked += 1
+        keys = [k for k in params.keys()
+                if not params.flags(k) & mi_.ParamFlags.NonDifferentiable.value]
+        if not keys:
+            continue
+        t = mi_.Float(0.0)
+        dr.enable_grad(t)
+        values = {k: float(params[k][0]) for k in keys}
+        for k in keys:
+            params[k] = mi_.Float(values[k]) + t
+        params.update()
+        v = b.eval(mi_.BSDFContext(), test_jit.make_si(wi), mi_.Vector3f(wo.T))
+        dr.forward(t)
+        g = np.array(dr.grad(v))
+        assert np.all(np.isfinite(g)), (e['name'], keys, int(np.sum(~np.isfinite(g))))
+        for k in keys:
+            params[k] = mi_.Float(values[k])
+        params.update()
+        checked += len(keys)
     assert checked >= 10

@@ -484,9 +484,31 @@ fn fuzz_parameters_and_abi() {
         cases(),
     );
     run_strategy("structured JSON", object(), cases());
-    run_strategy("mutated valid materials", mutated_material(), cases());
     // The on-success path must actually be reached, not only refusals.
     assert!(ACCEPTED.load(Ordering::Relaxed) > 0);
+}
+
+/// Mutated valid materials, in two tests of half the cases each (each
+/// runner draws its own random cases), so that the test harness's threads
+/// share them: an accepted material builds and runs its programs, about
+/// 85 ms each, which made this strategy nearly all of the fuzz run's time
+/// on one thread.
+#[test]
+fn fuzz_mutated_materials_first_half() {
+    run_strategy(
+        "mutated valid materials (1 of 2)",
+        mutated_material(),
+        cases().div_ceil(2),
+    );
+}
+
+#[test]
+fn fuzz_mutated_materials_second_half() {
+    run_strategy(
+        "mutated valid materials (2 of 2)",
+        mutated_material(),
+        cases().div_ceil(2),
+    );
 }
 
 /// Valid materials (those tagged `fuzz` in tests/materials.json) with random
