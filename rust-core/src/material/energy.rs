@@ -45,15 +45,6 @@ use crate::sampling::SplitMix64;
 use glam::DVec3;
 use std::f64::consts::PI;
 
-/// What the material may reflect from any direction, below 1 by the table's
-/// margin: its transfer rows are Monte Carlo estimates (about 0.2% of
-/// noise for the random surfaces' 4096 samples per cell), and m is
-/// interpolated between the cells the bound holds for. The margin is also
-/// what the default changes at moderate angles where Stam's albedo is
-/// already about 1 (smooth surfaces near normal incidence): 0.99 changed
-/// them by 1.2-3%, 0.995 by 0.3-2.1% (docs/energy.md).
-const TARGET_ALBEDO: f64 = 0.995;
-
 /// The horizon taper at a direction's cosine: 1 from `from_cos` on, below
 /// it t = 3 x^2 - 2 x^3 with x = cos / from_cos, smoothly to 0 (t / cos
 /// stays bounded).
@@ -184,7 +175,7 @@ impl EnergyTable {
                                     let lambda = lambda_lo + k as f64 * table.lambda_step;
                                     let transfer =
                                         table.symmetric(table.transfer(white, lambda, samples));
-                                    (k, fixed_point(&transfer, cells))
+                                    (k, fixed_point(&transfer, cells, hint.target_albedo))
                                 })
                                 .collect::<Vec<_>>()
                         })
@@ -562,8 +553,8 @@ impl<'a> FactorProgram<'a> for PairFactorProgram<'a> {
 
 /// The scaling of one wavelength's transfer matrix (see the module
 /// documentation): every row of diag(m) T diag(m) sums to at most
-/// TARGET_ALBEDO.
-fn fixed_point(t: &[f64], cells: usize) -> Vec<f64> {
+/// `target`.
+fn fixed_point(t: &[f64], cells: usize, target: f64) -> Vec<f64> {
     let apply = |m: &[f64]| -> Vec<f64> {
         (0..cells)
             .map(|a| {
@@ -573,8 +564,8 @@ fn fixed_point(t: &[f64], cells: usize) -> Vec<f64> {
             .collect()
     };
     let bound = |tm: f64| {
-        if tm > TARGET_ALBEDO {
-            TARGET_ALBEDO / tm
+        if tm > target {
+            target / tm
         } else {
             1.0
         }
