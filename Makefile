@@ -130,9 +130,11 @@ test-rust:
 # Two (or more) pytest workers (pytest-xdist): a clean checkout compiles its
 # Dr.Jit kernels (.drjit-cache) on the first run, one core per process. Each
 # file runs in one worker (--dist loadfile): test_wheel.py builds dist/ and
-# test_animation.py starts a Dask cluster in module fixtures.
+# test_animation.py starts a Dask cluster in module fixtures. The files go
+# out longest first (tests/conftest.py; --no-loadscope-reorder keeps that
+# order instead of xdist's by test count).
 test-python: plugin render-tool
-	$(PYTHON) -m pytest -q -n auto --dist loadfile tests
+	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder tests
 
 # Everything, in the order that fails fastest.
 test: setup lint test-rust test-python
