@@ -44,6 +44,7 @@ use crate::sampling::warps::radical_inverse;
 use crate::sampling::SplitMix64;
 use glam::DVec3;
 use std::f64::consts::PI;
+use std::ops::Range;
 
 /// The horizon taper at a direction's cosine: 1 from `from_cos` on, below
 /// it t = 3 x^2 - 2 x^3 with x = cos / from_cos, smoothly to 0 (t / cos
@@ -109,14 +110,7 @@ pub struct PairEnergy<'a> {
 impl PairEnergy<'_> {
     #[inline]
     pub fn at(&self, lambda_nm: f64) -> f64 {
-        let t = self.table;
-        if t.nodes == 1 {
-            return self.product[0];
-        }
-        let x = ((lambda_nm - t.lambda_lo) / t.lambda_step).clamp(0.0, (t.nodes - 1) as f64);
-        let k = (x as usize).min(t.nodes - 2);
-        let f = x - k as f64;
-        self.product[k] + f * (self.product[k + 1] - self.product[k])
+        self.table.interpolate(&self.product, lambda_nm)
     }
 }
 
@@ -209,18 +203,57 @@ impl EnergyTable {
     /// The pair's factors at every node.
     #[inline]
     pub fn pair(&self, wi: DVec3, wo: DVec3) -> PairEnergy<'_> {
-        let mut product = [0.0; MAX_NODES];
-        let mut a = [0.0; MAX_NODES];
-        self.factors(wi, &mut a);
-        self.factors(wo, &mut product);
-        let taper = horizon_taper(wi.z, self.taper_cos) * horizon_taper(wo.z, self.taper_cos);
-        for (p, x) in product.iter_mut().zip(a).take(self.nodes) {
-            *p *= x * taper;
-        }
         PairEnergy {
             table: self,
-            product,
+            product: self.products(wi, wo, 0..self.nodes),
         }
+    }
+
+    /// The pair's factor at one wavelength: `pair(wi, wo).at(lambda_nm)`,
+    /// from the two nodes around it only (a grating's table has 25).
+    #[inline]
+    pub fn pair_at(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
+        let (k, _) = self.node_below(lambda_nm);
+        let product = self.products(wi, wo, k..(k + 2).min(self.nodes));
+        self.interpolate(&product, lambda_nm)
+    }
+
+    /// m(wi) m(wo) times the pair's horizon taper at the nodes `nodes` (the
+    /// other entries 0).
+    #[inline]
+    fn products(&self, wi: DVec3, wo: DVec3, nodes: Range<usize>) -> [f64; MAX_NODES] {
+        let mut product = [0.0; MAX_NODES];
+        let mut a = [0.0; MAX_NODES];
+        self.factors(wi, nodes.clone(), &mut a);
+        self.factors(wo, nodes.clone(), &mut product);
+        let taper = horizon_taper(wi.z, self.taper_cos) * horizon_taper(wo.z, self.taper_cos);
+        for q in nodes {
+            product[q] *= a[q] * taper;
+        }
+        product
+    }
+
+    /// The node at or below `lambda_nm` (clamped to the band; the last but
+    /// one at its top) and the wavelength's fraction of the way to the next.
+    #[inline]
+    fn node_below(&self, lambda_nm: f64) -> (usize, f64) {
+        if self.nodes == 1 {
+            return (0, 0.0);
+        }
+        let x =
+            ((lambda_nm - self.lambda_lo) / self.lambda_step).clamp(0.0, (self.nodes - 1) as f64);
+        let k = (x as usize).min(self.nodes - 2);
+        (k, x - k as f64)
+    }
+
+    /// Per-node values at `lambda_nm`, linear between the nodes.
+    #[inline]
+    fn interpolate(&self, product: &[f64; MAX_NODES], lambda_nm: f64) -> f64 {
+        if self.nodes == 1 {
+            return product[0];
+        }
+        let (k, f) = self.node_below(lambda_nm);
+        product[k] + f * (product[k + 1] - product[k])
     }
 
     /// The cell centre's direction.
@@ -308,11 +341,11 @@ impl EnergyTable {
         out
     }
 
-    /// m at a unit direction above the horizon, at every node into `out`,
-    /// interpolated between the cell centres (linear in sqrt(cos) and,
-    /// periodically, in the azimuth).
+    /// m at a unit direction above the horizon, at the nodes `nodes` into
+    /// `out`, interpolated between the cell centres (linear in sqrt(cos)
+    /// and, periodically, in the azimuth).
     #[inline]
-    fn factors(&self, d: DVec3, out: &mut [f64; MAX_NODES]) {
+    fn factors(&self, d: DVec3, nodes: Range<usize>, out: &mut [f64; MAX_NODES]) {
         let x = d.z.clamp(0.0, 1.0).sqrt() * self.radial as f64 - 0.5;
         let i0 = (x.max(0.0) as usize).min(self.radial - 1);
         let i1 = (i0 + 1).min(self.radial - 1);
@@ -334,8 +367,8 @@ impl EnergyTable {
             fi * (1.0 - fj),
             fi * fj,
         ];
-        for (q, o) in out.iter_mut().enumerate().take(k) {
-            *o = w[0] * a[q] + w[1] * b[q] + w[2] * c[q] + w[3] * e[q];
+        for q in nodes {
+            out[q] = w[0] * a[q] + w[1] * b[q] + w[2] * c[q] + w[3] * e[q];
         }
     }
 
@@ -350,7 +383,8 @@ impl EnergyTable {
             let sin = (1.0 - cos * cos).max(0.0).sqrt();
             for b in 0..64 {
                 let phi = 2.0 * PI * b as f64 / 64.0;
-                self.factors(DVec3::new(sin * phi.cos(), sin * phi.sin(), cos), &mut out);
+                let d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+                self.factors(d, 0..self.nodes, &mut out);
                 least = out[..self.nodes].iter().cloned().fold(least, f64::min);
             }
         }

@@ -213,6 +213,8 @@ impl Brdf {
     }
 
     /// `eval_spectral_at` with the Fresnel term at the pair's cosine given.
+    /// One wavelength: the energy factor from the table's two nodes around
+    /// it (`eval_spectral_scaled` takes all the nodes, for several).
     #[inline]
     pub fn eval_spectral_with(
         &self,
@@ -220,12 +222,11 @@ impl Brdf {
         lambda_nm: f64,
         fresnel: &FresnelAtCos,
     ) -> f64 {
-        self.eval_spectral_scaled(
-            geom,
-            lambda_nm,
-            fresnel,
-            &self.pair_energy(geom.wi, geom.wo),
-        )
+        let f = f_spectral(geom, lambda_nm, fresnel, |k| self.surface.kernel(k, geom));
+        match self.energy_table() {
+            Some(t) if f > 0.0 => f * t.pair_at(geom.wi, geom.wo, lambda_nm),
+            _ => f,
+        }
     }
 
     /// `eval_spectral_with` with the pair's energy scaling given (several
