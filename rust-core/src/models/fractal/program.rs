@@ -21,7 +21,7 @@
 //! - Sampling: the core's strategy (`sampling.rs`: a defensive part, half
 //!   cosine and half uniform, and the radial lobe of the profile in the
 //!   projected plane, frozen at the mirror configuration, with the lobe's
-//!   share 0.9 times its mass inside the unit disc; RGB: the equal
+//!   share 0.9 times the cube of its mass inside the unit disc; RGB: the equal
 //!   mixture of the four RGB sampling wavelengths). The lobe's radius is
 //!   drawn from `RadialProposal`, the profile's radial law interpolated
 //!   linearly in ln x between cell edges and drawn with an alias table
@@ -33,7 +33,7 @@
 
 use super::math::{LN_2PI, LN_PI};
 use super::profile::ProfileParts;
-use super::sampling::RadialProposal;
+use super::sampling::{RadialProposal, LOBE_SHARE_POWER};
 use super::{Fractal, FractalSurface, LN_4PI2};
 use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
@@ -184,12 +184,14 @@ impl FractalSurface {
         (cos_i * 2.0).ln() * (-2.0 * self.inv_alpha) - self.inv_alpha * self.ln_a_const
     }
 
-    /// The lobe's share of a component (0.9 times its mass inside the
-    /// unit disc, in the proposal's closed form) at ln c.
+    /// The lobe's share of a component (`sampling::lobe_share` of its mass
+    /// inside the unit disc, in the proposal's closed form) at ln c.
     fn lobe_share<'a>(&self, proposal: &RadialProposal, ln_c: Value<'a>) -> Value<'a> {
         let z = (ln_c * 2.0 - proposal.ln_inside_b).exp();
         let outside = ((z + 1.0).ln() * (-0.5 * self.alpha)).exp();
-        (1.0 - outside) * (1.0 - DEFENSIVE_FRACTION)
+        let inside = 1.0 - outside;
+        const _: () = assert!(LOBE_SHARE_POWER == 3);
+        inside * inside * inside * (1.0 - DEFENSIVE_FRACTION)
     }
 }
 
