@@ -43,8 +43,8 @@ use crate::program::{lookup, Builder, Value};
 use crate::sampling::warps::radical_inverse;
 use crate::sampling::SplitMix64;
 use glam::DVec3;
+use std::cell::OnceCell;
 use std::f64::consts::PI;
-use std::ops::Range;
 
 /// The horizon taper at a direction's cosine: 1 from `from_cos` on, below
 /// it t = 3 x^2 - 2 x^3 with x = cos / from_cos, smoothly to 0 (t / cos
@@ -100,17 +100,58 @@ pub struct EnergyTable {
 /// Most wavelength nodes of a table.
 pub const MAX_NODES: usize = 32;
 
-/// m(wi, lambda_k) m(wo, lambda_k) of one pair at the table's nodes, and
-/// its value at any wavelength by linear interpolation.
+/// m(wi, lambda) m(wo, lambda) times the horizon taper of one pair, at any
+/// wavelength (linear between the table's nodes). The table's cells around
+/// wi and wo are looked up on the first `at` and only the two nodes around
+/// each asked wavelength are read: most RGB evaluations of a grating ask
+/// for none (no order's peak in the band: 0.09 calls per evaluation of the
+/// compact disc), and the rest for a few.
 pub struct PairEnergy<'a> {
     table: &'a EnergyTable,
-    product: [f64; MAX_NODES],
+    wi: DVec3,
+    wo: DVec3,
+    corners: OnceCell<PairCorners>,
+}
+
+/// Where a pair's factors come from: each direction's four cell rows and
+/// bilinear weights, and the pair's taper.
+struct PairCorners {
+    wi: Corners,
+    wo: Corners,
+    taper: f64,
+}
+
+/// The start of four rows of `EnergyTable::m` and their bilinear weights.
+struct Corners {
+    rows: [usize; 4],
+    weights: [f64; 4],
+}
+
+impl Corners {
+    #[inline]
+    fn at_node(&self, m: &[f64], q: usize) -> f64 {
+        let (r, w) = (&self.rows, &self.weights);
+        w[0] * m[r[0] + q] + w[1] * m[r[1] + q] + w[2] * m[r[2] + q] + w[3] * m[r[3] + q]
+    }
 }
 
 impl PairEnergy<'_> {
     #[inline]
     pub fn at(&self, lambda_nm: f64) -> f64 {
-        self.table.interpolate(&self.product, lambda_nm)
+        let table = self.table;
+        let c = self.corners.get_or_init(|| PairCorners {
+            wi: table.corners(self.wi),
+            wo: table.corners(self.wo),
+            taper: horizon_taper(self.wi.z, table.taper_cos)
+                * horizon_taper(self.wo.z, table.taper_cos),
+        });
+        let node = |q: usize| c.wo.at_node(&table.m, q) * (c.wi.at_node(&table.m, q) * c.taper);
+        let (k, f) = table.node_below(lambda_nm);
+        if table.nodes == 1 {
+            return node(0);
+        }
+        let below = node(k);
+        below + f * (node(k + 1) - below)
     }
 }
 
@@ -200,37 +241,15 @@ impl EnergyTable {
         table
     }
 
-    /// The pair's factors at every node.
+    /// The pair's factors, looked up when first asked for.
     #[inline]
     pub fn pair(&self, wi: DVec3, wo: DVec3) -> PairEnergy<'_> {
         PairEnergy {
             table: self,
-            product: self.products(wi, wo, 0..self.nodes),
+            wi,
+            wo,
+            corners: OnceCell::new(),
         }
-    }
-
-    /// The pair's factor at one wavelength: `pair(wi, wo).at(lambda_nm)`,
-    /// from the two nodes around it only (a grating's table has 25).
-    #[inline]
-    pub fn pair_at(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
-        let (k, _) = self.node_below(lambda_nm);
-        let product = self.products(wi, wo, k..(k + 2).min(self.nodes));
-        self.interpolate(&product, lambda_nm)
-    }
-
-    /// m(wi) m(wo) times the pair's horizon taper at the nodes `nodes` (the
-    /// other entries 0).
-    #[inline]
-    fn products(&self, wi: DVec3, wo: DVec3, nodes: Range<usize>) -> [f64; MAX_NODES] {
-        let mut product = [0.0; MAX_NODES];
-        let mut a = [0.0; MAX_NODES];
-        self.factors(wi, nodes.clone(), &mut a);
-        self.factors(wo, nodes.clone(), &mut product);
-        let taper = horizon_taper(wi.z, self.taper_cos) * horizon_taper(wo.z, self.taper_cos);
-        for q in nodes {
-            product[q] *= a[q] * taper;
-        }
-        product
     }
 
     /// The node at or below `lambda_nm` (clamped to the band; the last but
@@ -244,16 +263,6 @@ impl EnergyTable {
             ((lambda_nm - self.lambda_lo) / self.lambda_step).clamp(0.0, (self.nodes - 1) as f64);
         let k = (x as usize).min(self.nodes - 2);
         (k, x - k as f64)
-    }
-
-    /// Per-node values at `lambda_nm`, linear between the nodes.
-    #[inline]
-    fn interpolate(&self, product: &[f64; MAX_NODES], lambda_nm: f64) -> f64 {
-        if self.nodes == 1 {
-            return product[0];
-        }
-        let (k, f) = self.node_below(lambda_nm);
-        product[k] + f * (product[k + 1] - product[k])
     }
 
     /// The cell centre's direction.
@@ -341,11 +350,11 @@ impl EnergyTable {
         out
     }
 
-    /// m at a unit direction above the horizon, at the nodes `nodes` into
-    /// `out`, interpolated between the cell centres (linear in sqrt(cos)
-    /// and, periodically, in the azimuth).
+    /// The four cell rows around a unit direction above the horizon and
+    /// their weights: m is interpolated between the cell centres, linearly
+    /// in sqrt(cos) and, periodically, in the azimuth.
     #[inline]
-    fn factors(&self, d: DVec3, nodes: Range<usize>, out: &mut [f64; MAX_NODES]) {
+    fn corners(&self, d: DVec3) -> Corners {
         let x = d.z.clamp(0.0, 1.0).sqrt() * self.radial as f64 - 0.5;
         let i0 = (x.max(0.0) as usize).min(self.radial - 1);
         let i1 = (i0 + 1).min(self.radial - 1);
@@ -359,16 +368,15 @@ impl EnergyTable {
             let j0 = (y as usize).min(n - 1);
             (j0, (j0 + 1) % n, (y - j0 as f64).clamp(0.0, 1.0))
         };
-        let row = |i: usize, j: usize| &self.m[(i * n + j) * k..(i * n + j + 1) * k];
-        let (a, b, c, e) = (row(i0, j0), row(i0, j1), row(i1, j0), row(i1, j1));
-        let w = [
-            (1.0 - fi) * (1.0 - fj),
-            (1.0 - fi) * fj,
-            fi * (1.0 - fj),
-            fi * fj,
-        ];
-        for q in nodes {
-            out[q] = w[0] * a[q] + w[1] * b[q] + w[2] * c[q] + w[3] * e[q];
+        let row = |i: usize, j: usize| (i * n + j) * k;
+        Corners {
+            rows: [row(i0, j0), row(i0, j1), row(i1, j0), row(i1, j1)],
+            weights: [
+                (1.0 - fi) * (1.0 - fj),
+                (1.0 - fi) * fj,
+                fi * (1.0 - fj),
+                fi * fj,
+            ],
         }
     }
 
@@ -376,7 +384,6 @@ impl EnergyTable {
     /// wavelength node (a 64 x 64 grid of directions): the default's f
     /// differs from Stam's by at most 1 - that squared for pairs there.
     pub fn min_factor_within(&self, cos_min: f64) -> f64 {
-        let mut out = [0.0; MAX_NODES];
         let mut least: f64 = 1.0;
         for a in 0..64 {
             let cos = cos_min + (1.0 - cos_min) * a as f64 / 63.0;
@@ -384,8 +391,10 @@ impl EnergyTable {
             for b in 0..64 {
                 let phi = 2.0 * PI * b as f64 / 64.0;
                 let d = DVec3::new(sin * phi.cos(), sin * phi.sin(), cos);
-                self.factors(d, 0..self.nodes, &mut out);
-                least = out[..self.nodes].iter().cloned().fold(least, f64::min);
+                let corners = self.corners(d);
+                for q in 0..self.nodes {
+                    least = least.min(corners.at_node(&self.m, q));
+                }
             }
         }
         least
