@@ -1,5 +1,7 @@
 //! Profiling aid: evaluates one material many times (for perf/callgrind).
-//! Usage: cargo run --release -p stam-core --example profile_eval -- '<json>' [spectral|rgb] [count]
+//! Usage: cargo run --release -p stam-core --example profile_eval -- '<json>' [spectral|rgb|rgb-sampled] [count]
+//! (rgb-sampled: wo drawn by the material's RGB strategy, where a render's
+//! evaluations are: on a grating's orders, rather than uniformly.)
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -32,12 +34,16 @@ fn main() {
         let phi = 2.0 * PI * next();
         let st = (1.0 - ct * ct).sqrt();
         let wi = DVec3::new(st * phi.cos(), st * phi.sin(), ct);
-        let ct = 0.05 + 0.95 * next();
-        let phi = 2.0 * PI * next();
-        let st = (1.0 - ct * ct).sqrt();
-        let wo = DVec3::new(st * phi.cos(), st * phi.sin(), ct);
+        let wo = if mode == "rgb-sampled" {
+            brdf.sample(wi, None, [next(), next(), next()]).wo
+        } else {
+            let ct = 0.05 + 0.95 * next();
+            let phi = 2.0 * PI * next();
+            let st = (1.0 - ct * ct).sqrt();
+            DVec3::new(st * phi.cos(), st * phi.sin(), ct)
+        };
         let lambda = 380.0 + 400.0 * next();
-        acc += if mode == "rgb" {
+        acc += if mode.starts_with("rgb") {
             brdf.eval_rgb(wi, wo)[1]
         } else {
             brdf.eval_spectral(wi, wo, lambda)

@@ -101,16 +101,16 @@ pub struct EnergyTable {
 pub const MAX_NODES: usize = 32;
 
 /// m(wi, lambda) m(wo, lambda) times the horizon taper of one pair, at any
-/// wavelength (linear between the table's nodes). The table's cells around
-/// wi and wo are looked up on the first `at` and only the two nodes around
-/// each asked wavelength are read: most RGB evaluations of a grating ask
-/// for none (no order's peak in the band: 0.09 calls per evaluation of the
-/// compact disc), and the rest for a few.
+/// wavelength (linear between the table's nodes). The products at every
+/// node are made on the first `at`, once: most RGB evaluations of a grating
+/// ask for none (no order's peak in the band: 0.09 calls per evaluation of
+/// the compact disc at uniform random pairs), and those on a peak for
+/// dozens (three per order, 32 for a broad zeroth order).
 pub struct PairEnergy<'a> {
     table: &'a EnergyTable,
     wi: DVec3,
     wo: DVec3,
-    corners: OnceCell<PairCorners>,
+    products: OnceCell<[f64; MAX_NODES]>,
 }
 
 /// Where a pair's factors come from: each direction's four cell rows and
@@ -139,19 +139,27 @@ impl PairEnergy<'_> {
     #[inline]
     pub fn at(&self, lambda_nm: f64) -> f64 {
         let table = self.table;
-        let c = self.corners.get_or_init(|| PairCorners {
-            wi: table.corners(self.wi),
-            wo: table.corners(self.wo),
-            taper: horizon_taper(self.wi.z, table.taper_cos)
-                * horizon_taper(self.wo.z, table.taper_cos),
+        let products = self.products.get_or_init(|| {
+            let pair = table.pair_corners(self.wi, self.wo);
+            let mut products = [0.0; MAX_NODES];
+            for (q, p) in products.iter_mut().enumerate().take(table.nodes) {
+                *p = pair.at_node(&table.m, q);
+            }
+            products
         });
-        let node = |q: usize| c.wo.at_node(&table.m, q) * (c.wi.at_node(&table.m, q) * c.taper);
         let (k, f) = table.node_below(lambda_nm);
         if table.nodes == 1 {
-            return node(0);
+            return products[0];
         }
-        let below = node(k);
-        below + f * (node(k + 1) - below)
+        products[k] + f * (products[k + 1] - products[k])
+    }
+}
+
+impl PairCorners {
+    /// m(wi) m(wo) times the taper at node q.
+    #[inline]
+    fn at_node(&self, m: &[f64], q: usize) -> f64 {
+        self.wo.at_node(m, q) * (self.wi.at_node(m, q) * self.taper)
     }
 }
 
@@ -248,7 +256,29 @@ impl EnergyTable {
             table: self,
             wi,
             wo,
-            corners: OnceCell::new(),
+            products: OnceCell::new(),
+        }
+    }
+
+    /// The pair's factor at one wavelength: `pair(wi, wo).at(lambda_nm)`
+    /// from the two nodes around it only (a grating's table has 25).
+    #[inline]
+    pub fn pair_at(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
+        let pair = self.pair_corners(wi, wo);
+        let (k, f) = self.node_below(lambda_nm);
+        if self.nodes == 1 {
+            return pair.at_node(&self.m, 0);
+        }
+        let below = pair.at_node(&self.m, k);
+        below + f * (pair.at_node(&self.m, k + 1) - below)
+    }
+
+    #[inline]
+    fn pair_corners(&self, wi: DVec3, wo: DVec3) -> PairCorners {
+        PairCorners {
+            wi: self.corners(wi),
+            wo: self.corners(wo),
+            taper: horizon_taper(wi.z, self.taper_cos) * horizon_taper(wo.z, self.taper_cos),
         }
     }
 

@@ -109,6 +109,27 @@ fn compact_disc_stays_below_one_between_table_cells() {
     }
 }
 
+/// One wavelength's factor from its two nodes (`pair_at`, what a spectral
+/// evaluation uses) equals the factor from all the nodes (`pair(..).at`,
+/// several wavelengths of one pair), exactly, for a per-wavelength
+/// (grating) and a colour-neutral (Gaussian) table, inside and outside the
+/// band's nodes.
+#[test]
+fn one_wavelength_factor_equals_the_all_node_one() {
+    let mut rng = SplitMix64(4);
+    for json in [MATERIALS[0], MATERIALS[4]] {
+        let table = Brdf::from_json(json).unwrap();
+        let table = table.energy_table().unwrap();
+        for _ in 0..2000 {
+            let wi = direction(rng.next_f64(), 6.3 * rng.next_f64());
+            let wo = direction(rng.next_f64(), 6.3 * rng.next_f64());
+            let lambda = 300.0 + 600.0 * rng.next_f64();
+            let all = table.pair(wi, wo).at(lambda);
+            assert_eq!(table.pair_at(wi, wo, lambda), all, "{json} at {lambda} nm");
+        }
+    }
+}
+
 /// A pair's factor at a wavelength does not depend on what was asked
 /// before (the cells are looked up once, on the first `at`, and each
 /// wavelength reads its two nodes): asked after other wavelengths it equals

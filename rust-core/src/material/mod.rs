@@ -213,6 +213,8 @@ impl Brdf {
     }
 
     /// `eval_spectral_at` with the Fresnel term at the pair's cosine given.
+    /// One wavelength: the energy factor from the table's two nodes around
+    /// it (`eval_spectral_scaled` takes all the nodes, for several).
     #[inline]
     pub fn eval_spectral_with(
         &self,
@@ -222,7 +224,7 @@ impl Brdf {
     ) -> f64 {
         let f = f_spectral(geom, lambda_nm, fresnel, |k| self.surface.kernel(k, geom));
         match self.energy_table() {
-            Some(t) if f > 0.0 => f * t.pair(geom.wi, geom.wo).at(lambda_nm),
+            Some(t) if f > 0.0 => f * t.pair_at(geom.wi, geom.wo, lambda_nm),
             _ => f,
         }
     }
