@@ -478,7 +478,7 @@ impl EnergyTable {
         }
         let table = b.table(self.m.iter().map(|&v| v as f32).collect());
         let k = self.nodes;
-        // The node pair and weight (as PairEnergy::at).
+        // The node pair and weight (as EnergyTable::pair_at).
         let (q0, fq) = match lambda_nm {
             Some(lambda) if k > 1 => {
                 let x = ((lambda - self.lambda_lo) * (1.0 / self.lambda_step))
@@ -556,7 +556,7 @@ impl EnergyTable {
     }
 
     /// The four cells around a unit direction above the horizon (as
-    /// `factors`): each as the table index of its node 0, and its bilinear
+    /// `corners`): each as the table index of its node 0, and its bilinear
     /// weight.
     fn corners_program<'a>(&self, b: &'a Builder, d: Vec3<'a>) -> [(Value<'a>, Value<'a>); 4] {
         let r = self.radial as f64;
