@@ -6,6 +6,7 @@ use super::*;
 use crate::models::gaussian;
 use crate::sampling::inverse_normal;
 use crate::testing::chi2::{chi2_fit, chi2_fit_against};
+use crate::testing::{cosine_weights, mean_var, sampled_weights};
 use std::f64::consts::PI;
 
 /// SplitMix64: deterministic uniforms for reproducible tests.
@@ -318,30 +319,18 @@ fn chi2_fractal() {
 
 /// Var(cosine) / Var(strategy) of the albedo estimate at `wi`, 550 nm.
 fn variance_ratio_to_cosine(brdf: &Brdf, wi: DVec3, n: usize) -> f64 {
-    let var = |xs: &[f64]| {
-        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
-        xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (xs.len() - 1) as f64
-    };
+    let f = |wo: DVec3| brdf.eval_spectral(wi, wo, 550.0);
     let mut rng = Rng(12345);
-    let is: Vec<f64> = (0..n)
-        .map(|_| {
+    let is = sampled_weights(
+        n,
+        || {
             let s = brdf.sample(wi, Some(550.0), rng.three());
-            if s.pdf > 0.0 && !s.coherent {
-                brdf.eval_spectral(wi, s.wo, 550.0) * s.wo.z / s.pdf
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let cos: Vec<f64> = (0..n)
-        .map(|_| {
-            let (r1, r2) = (rng.next_f64(), rng.next_f64());
-            let (r, phi) = (r1.sqrt(), 2.0 * PI * r2);
-            let wo = DVec3::new(r * phi.cos(), r * phi.sin(), (1.0 - r1).max(1e-12).sqrt());
-            PI * brdf.eval_spectral(wi, wo, 550.0)
-        })
-        .collect();
-    var(&cos) / var(&is)
+            (s.wo, if s.coherent { 0.0 } else { s.pdf })
+        },
+        f,
+    );
+    let cos = cosine_weights(n, &mut rng, f);
+    mean_var(&cos).1 / mean_var(&is).1
 }
 
 /// The very rough fractal at 30 degrees (its lobe 21% inside the unit

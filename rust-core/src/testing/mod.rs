@@ -49,3 +49,46 @@ pub fn directions() -> Vec<(DVec3, DVec3)> {
     }
     out
 }
+
+/// Directional-albedo estimates f cos / pdf of `n` samples drawn by `draw`
+/// (a direction and its pdf; pdf 0 for a failed sample, which weighs 0).
+pub fn sampled_weights(
+    n: usize,
+    mut draw: impl FnMut() -> (DVec3, f64),
+    f: impl Fn(DVec3) -> f64,
+) -> Vec<f64> {
+    (0..n)
+        .map(|_| {
+            let (wo, pdf) = draw();
+            if pdf > 0.0 {
+                f(wo) * wo.z / pdf
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The same estimates with cosine-weighted directions from `rng`.
+pub fn cosine_weights(
+    n: usize,
+    rng: &mut crate::benchmark::SplitMix64,
+    f: impl Fn(DVec3) -> f64,
+) -> Vec<f64> {
+    (0..n)
+        .map(|_| {
+            let (r1, r2) = (rng.next_f64(), rng.next_f64());
+            let (r, phi) = (r1.sqrt(), 2.0 * std::f64::consts::PI * r2);
+            let wo = DVec3::new(r * phi.cos(), r * phi.sin(), (1.0 - r1).max(1e-12).sqrt());
+            std::f64::consts::PI * f(wo)
+        })
+        .collect()
+}
+
+/// Mean and unbiased variance.
+pub fn mean_var(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
+    (mean, var)
+}

@@ -10,9 +10,9 @@ use crate::testing::chi2::chi2_fit;
 use crate::testing::programs::{
     eval_rgb_errors, eval_spectral_errors, exported, pairs, ProgramSampler,
 };
+use crate::testing::{cosine_weights, mean_var, sampled_weights};
 use crate::Brdf;
 use glam::DVec3;
-use std::f64::consts::PI;
 
 fn material(json: &str) -> Brdf {
     let json = crate::testing::stam_formula(json);
@@ -385,13 +385,6 @@ fn chi2_rejects_a_mismatched_pdf() {
     assert!(fit.p_value < 1e-6, "p = {}", fit.p_value);
 }
 
-fn mean_var(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
-    (mean, var)
-}
-
 /// Variance of the directional-albedo estimate f cos / pdf with the
 /// sampling programs, with the core's strategies (`Brdf::sample`) and
 /// with cosine sampling, at the same sample count (the estimator and
@@ -437,36 +430,23 @@ fn sampling_variance_against_core_and_cosine() {
                 };
                 let sampler = ProgramSampler::new(&brdf, wi, lambda);
                 let mut rng = Rng(12345);
-                let prog: Vec<f64> = (0..n)
-                    .map(|_| {
+                let prog = sampled_weights(
+                    n,
+                    || {
                         let s = crate::testing::chi2::Sampler::sample(&sampler, rng.three());
-                        if s.pdf > 0.0 {
-                            f(s.wo) * s.wo.z / s.pdf
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect();
-                let core: Vec<f64> = (0..n)
-                    .map(|_| {
+                        (s.wo, s.pdf)
+                    },
+                    f,
+                );
+                let core = sampled_weights(
+                    n,
+                    || {
                         let s = brdf.sample(wi, lambda, rng.three());
-                        if s.pdf > 0.0 {
-                            f(s.wo) * s.wo.z / s.pdf
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect();
-                let cos: Vec<f64> = (0..n)
-                    .map(|_| {
-                        let (r1, r2) = (rng.next_f64(), rng.next_f64());
-                        let r = r1.sqrt();
-                        let phi = 2.0 * PI * r2;
-                        let wo =
-                            DVec3::new(r * phi.cos(), r * phi.sin(), (1.0 - r1).max(1e-12).sqrt());
-                        PI * f(wo)
-                    })
-                    .collect();
+                        (s.wo, s.pdf)
+                    },
+                    f,
+                );
+                let cos = cosine_weights(n, &mut rng, f);
                 let (m_p, v_p) = mean_var(&prog);
                 let (m_c, v_c) = mean_var(&core);
                 let (_, v_cos) = mean_var(&cos);
