@@ -92,7 +92,8 @@ pub struct EnergyTable {
     /// Wavelength nodes, uniform from `lambda_lo`, `lambda_step` apart.
     lambda_lo: f64,
     lambda_step: f64,
-    /// 1 / lambda_step (a multiplication per lookup, as in the programs).
+    /// 1 / lambda_step: the lookups multiply by it, native and programs
+    /// alike.
     nodes_per_nm: f64,
     nodes: usize,
     /// m at the cell centres and nodes, [radial][azimuth][node].
@@ -104,8 +105,7 @@ pub const MAX_NODES: usize = 32;
 
 /// m(wi, lambda) m(wo, lambda) times the horizon taper of one pair, at any
 /// wavelength (linear between the table's nodes). The products at every
-/// node are made on the first `at`, in one pass over the eight rows around
-/// wi and wo, then kept: most RGB evaluations of a grating ask for no
+/// node are made on the first `at`, then kept: most RGB evaluations of a grating ask for no
 /// wavelength (no order's peak in the band: 0.09 calls per evaluation of
 /// the compact disc at uniform random pairs), one on a peak for about 18
 /// (three per order, 32 for a broad zeroth order) spread over most nodes.
@@ -160,19 +160,11 @@ impl PairCorners {
         self.wo.at_node(m, q) * (self.wi.at_node(m, q) * self.taper)
     }
 
-    /// `at_node` at every node of the table (the same operations, so the
-    /// same values), as one pass over row slices that the compiler
-    /// vectorises.
+    /// `at_node` at every node of the table.
     fn all_nodes(&self, table: &EnergyTable) -> [f64; MAX_NODES] {
-        let k = table.nodes;
-        let rows = |c: &Corners| c.rows.map(|r| &table.m[r..r + k]);
-        let (a, b) = (rows(&self.wi), rows(&self.wo));
-        let (wa, wb) = (self.wi.weights, self.wo.weights);
         let mut out = [0.0; MAX_NODES];
-        for (q, o) in out[..k].iter_mut().enumerate() {
-            let mi = wa[0] * a[0][q] + wa[1] * a[1][q] + wa[2] * a[2][q] + wa[3] * a[3][q];
-            let mo = wb[0] * b[0][q] + wb[1] * b[1][q] + wb[2] * b[2][q] + wb[3] * b[3][q];
-            *o = mo * (mi * self.taper);
+        for (q, o) in out[..table.nodes].iter_mut().enumerate() {
+            *o = self.at_node(&table.m, q);
         }
         out
     }
@@ -206,13 +198,14 @@ impl EnergyTable {
         };
         let nodes = hint.wavelength_nodes.clamp(2, MAX_NODES);
         let cells = radial * azimuth;
+        let lambda_step = (lambda_hi - lambda_lo) / (nodes - 1) as f64;
         let mut table = EnergyTable {
             radial,
             azimuthal: azimuth,
             taper_cos: hint.horizon_taper_cos,
             lambda_lo,
-            lambda_step: (lambda_hi - lambda_lo) / (nodes - 1) as f64,
-            nodes_per_nm: (nodes - 1) as f64 / (lambda_hi - lambda_lo),
+            lambda_step,
+            nodes_per_nm: 1.0 / lambda_step,
             nodes,
             m: vec![1.0; cells * nodes],
         };
@@ -481,8 +474,7 @@ impl EnergyTable {
         // The node pair and weight (as EnergyTable::pair_at).
         let (q0, fq) = match lambda_nm {
             Some(lambda) if k > 1 => {
-                let x = ((lambda - self.lambda_lo) * (1.0 / self.lambda_step))
-                    .clamp(0.0, (k - 1) as f64);
+                let x = ((lambda - self.lambda_lo) * self.nodes_per_nm).clamp(0.0, (k - 1) as f64);
                 let q = x.floor().min((k - 2) as f64);
                 (q, Some(x - q))
             }

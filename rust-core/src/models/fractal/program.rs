@@ -190,8 +190,8 @@ impl FractalSurface {
         let z = (ln_c * 2.0 - proposal.ln_inside_b).exp();
         let outside = ((z + 1.0).ln() * (-0.5 * self.alpha)).exp();
         let inside = 1.0 - outside;
-        const _: () = assert!(LOBE_SHARE_POWER == 3);
-        inside * inside * inside * (1.0 - DEFENSIVE_FRACTION)
+        let power = (1..LOBE_SHARE_POWER).fold(inside, |p, _| p * inside);
+        power * (1.0 - DEFENSIVE_FRACTION)
     }
 }
 
