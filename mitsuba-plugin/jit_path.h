@@ -180,7 +180,7 @@ public:
             for (size_t k = 1; k < NW; ++k)
                 lambda = dr::select(j == (float) k, wl[k], lambda);
             o = m_sample.run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }),
-                             tables);
+                             tables, params);
         } else {
             DRJIT_MARK_USED(wl);
             o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables, params);

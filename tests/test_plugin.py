@@ -194,7 +194,7 @@ def test06_zero_wavelength_is_safe(variant):
 # Sampling: chi2, weight * pdf == eval, bs.pdf == pdf(bs.wo)
 # ---------------------------------------------------------------------------
 
-def density_adapter(bsdf, wi, ctx, wavelengths=None):
+def density_adapter(bsdf, wi, ctx, wavelengths=None, uv=(0.5, 0.5)):
     """Like mi.chi2.BSDFAdapter, but (a) with non-zero wavelengths in spectral
     variants and (b) counting every sample of the glossy lobe whatever its
     weight: the test compares the sampling density with the pdf, and
@@ -204,7 +204,7 @@ def density_adapter(bsdf, wi, ctx, wavelengths=None):
     def make_si_n(n):
         si = dr.zeros(mi.SurfaceInteraction3f, n)
         si.wi = wi
-        si.uv = [0.5, 0.5]
+        si.uv = list(uv)
         if wavelengths is not None:
             si.wavelengths = list(wavelengths)
         return si

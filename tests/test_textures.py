@@ -157,6 +157,25 @@ def test_sigma_map_is_refused_where_it_cannot_go():
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_sigma_map_samples_follow_the_points_sigma(variant):
+    """Chi-square of the sampled directions against the pdf at a texel whose
+    sigma (0.08 um) is far from the map's mean (0.395 um, the built one):
+    the sampling program reads the point's sigma, as the pdf does."""
+    mi = stam_mitsuba.setup(variant)
+    from test_plugin import density_adapter, glossy_ctx
+    bsdf = mi.load_dict({'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0,
+                         'fresnel': 0.9, 'sigma_um': sigma_map(mi, [[0.08, 0.5], [0.5, 0.5]])})
+    wi = [0.6, 0.0, 0.8]
+    sample, pdf = density_adapter(bsdf, wi, glossy_ctx(),
+                                  [450.0, 520.0, 590.0, 660.0] if mi.is_spectral else None,
+                                  uv=(0.25, 0.25))
+    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample,
+                                 pdf_func=pdf, sample_dim=3, sample_count=200000, res=101,
+                                 ires=8)
+    assert chi2.run(), chi2.messages
+
+
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 def test_sigma_map_bad_values_give_finite_results(variant):
     """Negative, zero and NaN values read as the smoothest sigma (1e-6 um);
     values above the given sigma_um_max as that maximum."""
