@@ -22,9 +22,11 @@
 //! - Coherent lobe: F^2 e^-g as native, RGB by the rule at the nodes.
 //! - Sampling: a defensive mixture (cosine and uniform, as the core's) and
 //!   lobes in the half-vector slopes: for g0 (the roughness exponent at the
-//!   mirror direction) below `SERIES_MAX_G`, the series' own mixture of
-//!   Gaussians (term m ~ Poisson(g0 | m >= 1), variances m times a base),
-//!   whose density is one lookup of S, with a base fitted to the law (see
+//!   mirror direction) below `SERIES_MAX_G`, the series' mixture of
+//!   Gaussians (term m ~ Poisson(g0 | m >= 1), variances m times a base) as
+//!   two Gaussians (m = 1 and the mean of m >= 2: `TermMixture`; two
+//!   exponentials per density where a lookup of S was), with a base fitted
+//!   to the law (see
 //!   `slope_lobes`) and one frozen at the mirror; above it the Beckmann
 //!   asymptote (alpha = 2 sigma / T per axis). Slopes are reflected about
 //!   their normal, so the lobes live in solid angle and stay finite at the
@@ -47,9 +49,6 @@ use std::f64::consts::PI;
 /// Mirror roughness exponent below which the sampling lobe is the series'
 /// mixture (above: Beckmann).
 pub const SERIES_MAX_G: f64 = 12.0;
-/// Poisson terms the series lobe's inversion unrolls: P(m > 48 | g0 < 12)
-/// is below 1e-13.
-const SERIES_TERMS: usize = 48;
 /// The wavelength of the RGB strategy's lobe (nm).
 pub const RGB_SAMPLING_NM: f64 = 550.0;
 /// Share of the lobe probability of the lobe frozen at the mirror (the
@@ -171,11 +170,8 @@ fn expm1<'a>(g: Value<'a>) -> Value<'a> {
 struct Strategy<'a> {
     /// Coherent probability.
     p_coh: Value<'a>,
-    /// The lobes are the series' mixtures (else Beckmann).
-    series: Mask<'a>,
-    g0: Value<'a>,
-    /// E[m | m >= 1] (1 for Beckmann).
-    m_mean: Value<'a>,
+    /// The series' terms as two Gaussians (`TermMixture`; Beckmann: one).
+    terms: TermMixture<'a>,
     /// The fitted lobe and the lobe frozen at the mirror, and the
     /// probability of the second.
     lobes: [SlopeLobe<'a>; 2],
@@ -183,6 +179,55 @@ struct Strategy<'a> {
     /// Isotropic surfaces: the horizon twin and its probability (0 away
     /// from the rim).
     twin: Option<(TwinLobe<'a>, Value<'a>)>,
+}
+
+/// The series' terms m ~ Poisson(g0 | m >= 1), whose Gaussians have the
+/// covariance m / m_mean times the lobe's base, as two Gaussians: m = 1
+/// with its probability g0 / (e^g0 - 1), and the terms m >= 2 as one
+/// Gaussian at their mean E[m | m >= 2] (Beckmann: one Gaussian, the base).
+/// Sample and pdf read the same mixture, so the pdf is exact; against the
+/// whole Poisson mixture (a lookup of S per density, 48 terms unrolled to
+/// sample) it costs two exponentials, and the defensive part bounds the
+/// weights where the heavier terms' tails reach (docs/sampling.md).
+#[derive(Clone, Copy)]
+struct TermMixture<'a> {
+    /// Probability of the first Gaussian.
+    first: Value<'a>,
+    /// Covariance factors of the two (relative to the base).
+    scale: [Value<'a>; 2],
+}
+
+impl<'a> TermMixture<'a> {
+    fn new(series: Mask<'a>, g0: Value<'a>, m_mean: Value<'a>) -> TermMixture<'a> {
+        // E[m | m >= 2] = g (1 - e^-g) / (1 - e^-g (1 + g)); below g = 0.25
+        // its series 2 + g / 3 + g^2 / 18 (f32 loses the quotient's digits).
+        let e = (-g0).exp();
+        let exact = g0 * (1.0 - e) / (1.0 - e * (g0 + 1.0)).max(1e-30);
+        let small = g0 * (g0 * (1.0 / 18.0) + 1.0 / 3.0) + 2.0;
+        let m_rest = g0.lt(0.25).select(small, exact);
+        let inv_mean = 1.0 / m_mean;
+        TermMixture {
+            first: series.select(g0 / expm1(g0), 1.0),
+            scale: [
+                series.select(inv_mean, 1.0),
+                series.select(m_rest * inv_mean, 1.0),
+            ],
+        }
+    }
+
+    /// The mixture's density at quad (the base's quadratic form) for a
+    /// base of normalisation `norm`.
+    fn density(&self, norm: Value<'a>, quad: Value<'a>) -> Value<'a> {
+        let one = |v: Value<'a>| (quad * -0.5 / v).exp() / v;
+        let [a, bb] = self.scale;
+        norm * (one(a) * self.first + one(bb) * (1.0 - self.first))
+    }
+
+    /// The spread (sqrt of the covariance factor) of the Gaussian that t
+    /// (uniform) picks.
+    fn spread(&self, t: Value<'a>) -> Value<'a> {
+        t.lt(self.first).select(self.scale[0], self.scale[1]).sqrt()
+    }
 }
 
 /// The core's horizon twin (`sampling::HorizonLobe`): with (x', y') the
@@ -382,6 +427,7 @@ impl Gaussian {
         let g0 = a * a;
         let series = g0.lt(SERIES_MAX_G);
         let (lobes, m_mean) = self.slope_lobes(b, wi, k, g0, series);
+        let terms = TermMixture::new(series, g0, m_mean);
         // The twin (isotropic surfaces, the series regime) where the mirror
         // point is within 2 plane sds of the rim (as `build_component`).
         // Its share TWIN_SHARE e^-g_far, g_far = (k sigma)^2 the roughness
@@ -406,9 +452,7 @@ impl Gaussian {
         let mix = frozen_share;
         Strategy {
             p_coh,
-            series,
-            g0,
-            m_mean,
+            terms,
             lobes,
             mix,
             twin,
@@ -540,34 +584,19 @@ impl Gaussian {
     }
 
     /// The lobes' solid-angle density at unit wo (both above the horizon).
-    fn lobe_pdf<'a>(
-        &self,
-        b: &'a Builder,
-        st: &Strategy<'a>,
-        wi: Vec3<'a>,
-        wo: Vec3<'a>,
-    ) -> Value<'a> {
+    fn lobe_pdf<'a>(&self, st: &Strategy<'a>, wi: Vec3<'a>, wo: Vec3<'a>) -> Value<'a> {
         let h: Vec3 = std::array::from_fn(|i| wi[i] + wo[i]);
         let len = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
         let hz = h[2] / len;
         let cos_ih = (wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]) / len;
         // Slopes (the sampler's h = (-sx, -sy, 1) / |.|).
         let (sx, sy) = (-h[0] / h[2], -h[1] / h[2]);
-        let lk = SeriesLookup::new(b);
-        let g0 = st.g0;
-        let ln_g0 = g0.ln();
-        let series_norm = st.m_mean * g0.exp() / expm1(g0);
-        // Beckmann: the Gaussian; the series: sum_m P(m | m >= 1) of the
-        // Gaussians of covariance m / m_mean times the base's, = m_mean
-        // e^g0 / expm1(g0) S(g0, quad m_mean / 2) times the base's norm.
         let density = |lobe: &SlopeLobe<'a>| {
             let (dx, dy) = (sx - lobe.centre[0], sy - lobe.centre[1]);
             let [pxx, pxy, pyy] = lobe.precision;
             let quad = pxx * dx * dx + pxy * dx * dy * 2.0 + pyy * dy * dy;
             let norm = (pxx * pyy - pxy * pxy).max(0.0).sqrt() * (0.5 / PI);
-            let x = quad * st.m_mean * 0.5;
-            let series_density = series(b, &lk, g0, ln_g0, x) * series_norm;
-            norm * st.series.select(series_density, (quad * -0.5).exp())
+            st.terms.density(norm, quad)
         };
         let to_omega = 1.0 / (hz * hz * hz * cos_ih * 4.0);
         let half_vector = hz.gt(0.0) & cos_ih.gt(0.0);
@@ -722,18 +751,8 @@ impl SurfacePrograms for Gaussian {
         let t_lobe = mirror_lobe
             .select(t_lobe / st.mix, (t_lobe - st.mix) / (1.0 - st.mix))
             .clamp(0.0, 1.0 - 1e-7);
-        // The term m ~ Poisson(g0 | m >= 1) by inversion from m = 1.
-        let g0 = st.g0;
-        // P(m = 1 | m >= 1) = g0 / (e^g0 - 1); P(m) = P(m - 1) g0 / m.
-        let mut p = st.series.select(g0 / expm1(g0), 0.0);
-        let mut acc = p;
-        let mut m = b.c(1.0);
-        for i in 2..=SERIES_TERMS {
-            p = p * g0 * (1.0 / i as f64);
-            m = t_lobe.ge(acc).select(i as f64, m);
-            acc = acc + p;
-        }
-        let spread = st.series.select((m / st.m_mean).sqrt(), 1.0);
+        // The term's Gaussian.
+        let spread = st.terms.spread(t_lobe);
         // Box-Muller: two normals from u1, u2, then the lobe's Gaussian.
         let r = (-(1.0 - u1).ln()).sqrt() * std::f64::consts::SQRT_2;
         let phi = u2 * (2.0 * PI);
@@ -781,7 +800,7 @@ impl SurfacePrograms for Gaussian {
     ) -> Option<Value<'a>> {
         let st = self.strategy_program(b, shading, wi, lambda_nm);
         let defensive = (cosine_density_program(wo) + 0.5 / PI) * 0.5;
-        let lobe = self.lobe_pdf(b, &st, wi, wo);
+        let lobe = self.lobe_pdf(&st, wi, wo);
         let glossy = defensive * DEFENSIVE + lobe * (1.0 - DEFENSIVE);
         Some((1.0 - st.p_coh) * glossy)
     }
