@@ -59,3 +59,15 @@ pub fn uniform_linear<'a>(
     let hi = b.gather(table, at + 1.0);
     lo + (hi - lo) * t
 }
+
+/// `values[i]` for an integer-valued `i` in [0, values.len()) by a chain of
+/// compares and selects: for tables of a few constants this is cheaper on a
+/// SIMD CPU than a gather (which loads lane by lane); out-of-range indices
+/// give the nearest end's value.
+pub fn select_chain<'a>(b: &'a Builder, values: &[f64], i: Value<'a>) -> Value<'a> {
+    let mut out = b.c(values[0]);
+    for (k, &v) in values.iter().enumerate().skip(1) {
+        out = i.ge(k as f64 - 0.5).select(v, out);
+    }
+    out
+}

@@ -82,3 +82,17 @@ fn param_ids_are_their_codes() {
     assert_eq!(Op::from_code(29), Some(Op::Param));
     assert_eq!(Op::from_code(30), None);
 }
+
+#[test]
+fn select_chain_reads_the_indexed_value_and_clamps() {
+    let values = [0.5, -1.0, 2.0, 7.0];
+    let b = Builder::new();
+    let i = b.input();
+    let f = super::lookup::select_chain(&b, &values, i);
+    let p = b.finish(&[f]);
+    for (k, &v) in values.iter().enumerate() {
+        assert_eq!(p.run(&[k as f64]), vec![v]);
+    }
+    assert_eq!(p.run(&[-3.0f64]), vec![values[0]]);
+    assert_eq!(p.run(&[9.0f64]), vec![values[3]]);
+}

@@ -27,8 +27,6 @@ pub(super) enum PowerProgram {
     Rect {
         height_um: f64,
         fill: f64,
-        /// sinc^2(n d / Lam) for n = 0..len (the native table).
-        sinc2: Table,
     },
     Table {
         /// Per (beta sample, order): [c, h dc/dbeta, h^2/2 d2c/dbeta2],
@@ -62,13 +60,10 @@ impl PowerProgram {
     pub(super) fn new(b: &Builder, surface: &PeriodicSurface) -> PowerProgram {
         match &surface.model {
             Model::Rect {
-                height_um,
-                fill,
-                sinc2,
+                height_um, fill, ..
             } => PowerProgram::Rect {
                 height_um: *height_um,
                 fill: *fill,
-                sinc2: b.table(sinc2.iter().map(|&v| v as f32).collect()),
             },
             Model::Table(t) => {
                 let complex = !t.symmetric;
@@ -165,10 +160,12 @@ impl PowerProgram {
     /// register); 0 for orders the native table filtered out.
     pub(super) fn power<'a>(&self, b: &'a Builder, at: &PowerAt<'a>, n: Value<'a>) -> Value<'a> {
         match (self, at) {
-            (PowerProgram::Rect { fill, sinc2, .. }, PowerAt::Rect { s2 }) => {
-                let zero = (1.0 - *s2 * (4.0 * fill * (1.0 - fill))).max(0.0);
-                let other = *s2 * (4.0 * fill * fill) * b.gather(*sinc2, n.abs());
-                n.eq(0.0).select(zero, other)
+            (PowerProgram::Rect { fill, .. }, PowerAt::Rect { s2 }) => {
+                // sinc^2(pi n f) computed, not gathered from the native
+                // table (a gather loads lane by lane on a CPU: slower than
+                // one sine); the same values to f32 rounding.
+                let _ = b;
+                RectOrder::new(b.c(*fill), n).power(*s2)
             }
             (
                 PowerProgram::Table {

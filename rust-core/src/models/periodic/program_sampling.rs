@@ -34,7 +34,8 @@ use super::Periodic;
 use crate::models::{SampleProgram, Shading};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::Vec3;
-use crate::program::{Builder, Mask, Table, Value};
+use crate::program::lookup::select_chain;
+use crate::program::{Builder, Mask, Value};
 use crate::sampling::{band_density, DEFENSIVE_FRACTION, RGB_BAND_NM};
 use std::f64::consts::{PI, SQRT_2};
 use std::sync::OnceLock;
@@ -365,7 +366,6 @@ impl Periodic {
                 lobe = lobe * inv2s2 * (1.0 / PI);
             }
             None => {
-                let nodes = b.table(band_nodes().map(|x| x as f32).to_vec());
                 let zero = zero_order_nodes();
                 for (((&n, &w), bd), &is_zero) in orders
                     .n
@@ -384,7 +384,7 @@ impl Periodic {
                         let kk = small.select(1.0, kappa);
                         let c = band_cdf(b, lambda);
                         let tilt = small.select(1.0, kk * (kk * c).exp() / (kk.exp() - 1.0));
-                        let rho = band_density_program(b, nodes, lambda);
+                        let rho = band_density_program(b, lambda);
                         let sigma = self.sigma(lambda.max(1.0));
                         let nv =
                             (-(v * v) / (sigma * sigma * 2.0)).exp() / (sigma * (2.0 * PI).sqrt());
@@ -419,7 +419,7 @@ fn uniform_direction_program<'a>(r1: Value<'a>, r2: Value<'a>) -> Vec3<'a> {
 }
 
 /// The band density at lambda (piecewise linear, 0 outside the band).
-fn band_density_program<'a>(b: &'a Builder, nodes: Table, lambda: Value<'a>) -> Value<'a> {
+fn band_density_program<'a>(b: &'a Builder, lambda: Value<'a>) -> Value<'a> {
     let (lo, hi) = RGB_BAND_NM;
     let per = BINS as f64 / (hi - lo);
     let x = (lambda - lo) * per;
@@ -427,7 +427,8 @@ fn band_density_program<'a>(b: &'a Builder, nodes: Table, lambda: Value<'a>) -> 
     let x = inside.select(x, 0.0);
     let i = x.floor().min((BINS - 1) as f64);
     let f = x - i;
-    let (y0, y1) = (b.gather(nodes, i), b.gather(nodes, i + 1.0));
+    let y = band_nodes();
+    let (y0, y1) = (select_chain(b, &y[..BINS], i), select_chain(b, &y[1..], i));
     inside.select(y0 + (y1 - y0) * f, 0.0)
 }
 
@@ -438,9 +439,9 @@ fn band_cdf<'a>(b: &'a Builder, lambda: Value<'a>) -> Value<'a> {
     let x = ((lambda - lo) * (1.0 / width)).clamp(0.0, BINS as f64);
     let i = x.floor().min((BINS - 1) as f64);
     let f = (x - i) * width;
-    let cdf_t = b.table(band_cdf_nodes().map(|v| v as f32).to_vec());
-    let y_t = b.table(band_nodes().map(|v| v as f32).to_vec());
-    let (c0, y0, y1) = (b.gather(cdf_t, i), b.gather(y_t, i), b.gather(y_t, i + 1.0));
+    let (cdf, y) = (band_cdf_nodes(), band_nodes());
+    let c0 = select_chain(b, &cdf[..BINS], i);
+    let (y0, y1) = (select_chain(b, &y[..BINS], i), select_chain(b, &y[1..], i));
     c0 + f * y0 + (y1 - y0) * f * f * (0.5 / width)
 }
 
@@ -456,9 +457,8 @@ fn band_inverse_cdf<'a>(b: &'a Builder, c: Value<'a>) -> Value<'a> {
     for &ci in &cdf[1..BINS] {
         i = c.ge(ci).select(i + 1.0, i);
     }
-    let cdf_t = b.table(cdf.map(|x| x as f32).to_vec());
-    let y_t = b.table(y.map(|x| x as f32).to_vec());
-    let (c0, y0, y1) = (b.gather(cdf_t, i), b.gather(y_t, i), b.gather(y_t, i + 1.0));
+    let c0 = select_chain(b, &cdf[..BINS], i);
+    let (y0, y1) = (select_chain(b, &y[..BINS], i), select_chain(b, &y[1..], i));
     // y0 x + (y1 - y0) x^2 / (2 width) = c - c0, x in [0, width].
     let target = (c - c0).max(0.0);
     let disc = (y0 * y0 + (y1 - y0) * target * (2.0 / width)).max(0.0);
