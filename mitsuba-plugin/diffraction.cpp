@@ -108,8 +108,10 @@ Diffraction BSDF (:monosp:`diffraction`)
  * - height_um
    - |float|
    - Periodic surfaces, ``rect`` and ``sine`` profiles: bump height (rect),
-     peak-to-peak height (sine). Micrometres, in (0, 100]. (Default: ``cd``:
-     0.15; otherwise none, required)
+     peak-to-peak height (sine). Micrometres, in (0, 100]. JIT variants: also
+     a texture (a groove-depth map), point by point; a sine profile's
+     programs are built up to its largest value or ``height_um_max``.
+     (Default: ``cd``: 0.15; otherwise none, required)
    - |exposed|
  * - width_um
    - |float|

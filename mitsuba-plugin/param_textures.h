@@ -1,11 +1,11 @@
 /* param_textures.h: textures on the diffraction plugin's material
  * parameters (diffraction.cpp), in the JIT variants: a Gaussian surface's
- * `sigma_um` (scratch and wear maps) and a rect profile's `height_um` (a
- * compact disc whose groove depth varies). The core's programs read these
- * parameters (`Op::Param`) and are built for every value up to the
- * texture's largest (a Gaussian's `sigma_um_max`; a rect profile's powers
- * are a closed form in the height); this header gives each lane the
- * texture's value there. The twist map is diffraction.cpp's (a frame
+ * `sigma_um` (scratch and wear maps) and a grating's `height_um` (a compact
+ * disc whose groove depth varies; rect and sine profiles). The core's
+ * programs read these parameters (`Op::Param`) and are built for every
+ * value up to the texture's largest (a Gaussian's `sigma_um_max`, a sine
+ * profile's `height_um_max`; a rect profile's powers are a closed form in
+ * the height); this header gives each lane the texture's value there. The twist map is diffraction.cpp's (a frame
  * rotation, every variant). No physics.
  */
 #pragma once
@@ -16,6 +16,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <vector>
 
@@ -60,8 +62,9 @@ template <typename Float, typename Spectrum> struct ParamTextures {
 
     /// Checks where each texture may go and adds the core's parameters: the
     /// texture's mean as the parameter (where one value is needed: the
-    /// sampling's constants) and, for sigma, its largest value as
-    /// `sigma_um_max` (unless given), which the programs are built for.
+    /// sampling's constants) and, for sigma and a sine profile's height,
+    /// its largest value as `sigma_um_max` / `height_um_max` (unless
+    /// given), which the programs are built for.
     void attach(std::vector<Param> &params) {
         for (Entry &e : entries) {
             if constexpr (!dr::is_jit_v<Float>) {
@@ -72,30 +75,41 @@ template <typename Float, typename Spectrum> struct ParamTextures {
                 std::string surface = text_of(params, "surface"),
                             profile = text_of(params, "profile");
                 double max_um;
+                bool sine = false;
                 if (e.id == STAM_PARAM_SIGMA_UM) {
                     if (surface != "gaussian")
                         throw ParamError("parameter 'sigma_um' takes a texture only on surface "
                                          "\"gaussian\"; other surfaces take a number");
                     auto given = find(params, "sigma_um_max");
-                    max_um = given != params.end() ? given->given : (double) largest(e);
+                    max_um = given != params.end() ? given->given : shortest(largest(e));
                     if (given == params.end())
                         params.push_back(number("sigma_um_max", max_um, -1));
                 } else {
                     bool rect = profile == "rect" || (surface == "cd" && profile.empty());
-                    if (!rect)
+                    if (!rect && profile != "sine")
                         throw ParamError("parameter 'height_um' takes a texture only with the "
-                                         "rect profile (surface \"cd\", or \"periodic\" with "
-                                         "profile \"rect\")");
-                    max_um = (double) largest(e);
+                                         "rect and sine profiles (surface \"cd\", or "
+                                         "\"periodic\" with profile \"rect\" or \"sine\")");
+                    if (rect) {
+                        max_um = shortest(largest(e));
+                    } else {
+                        auto given = find(params, "height_um_max");
+                        max_um = given != params.end() ? given->given : shortest(largest(e));
+                        if (given == params.end())
+                            params.push_back(number("height_um_max", max_um, -1));
+                    }
+                    sine = !rect;
                 }
                 if (!(max_um > 0.0))
                     throw ParamError("parameter '" + e.name + "': the texture's largest value is " +
                                      std::to_string(max_um) + "; it must be positive somewhere");
-                // sigma: what the programs are built for; a rect's height:
-                // the core's upper bound (its powers are a closed form)
-                e.max = e.id == STAM_PARAM_SIGMA_UM ? (ScalarFloat) max_um : 100.f;
-                double mean = (double) dr::slice(dr::detach(e.texture->mean()), 0);
-                // (the core wants sigma_um <= sigma_um_max, in double)
+                // sigma and a sine's height: what the programs are built
+                // for; a rect's height: the core's upper bound (its powers
+                // are a closed form)
+                e.max = e.id == STAM_PARAM_SIGMA_UM || sine ? (ScalarFloat) max_um : 100.f;
+                double mean = shortest(dr::slice(dr::detach(e.texture->mean()), 0));
+                // (the core wants sigma_um <= sigma_um_max and height_um <=
+                // height_um_max, in double)
                 mean = std::isfinite(mean) && mean > 0.0
                            ? std::clamp(mean, (double) std::max(e.floor, 1e-6f), max_um)
                            : max_um;
@@ -135,6 +149,21 @@ private:
     static std::string text_of(std::vector<Param> &params, const char *name) {
         auto it = find(params, name);
         return it == params.end() ? std::string() : it->text;
+    }
+
+    /// A float as the shortest decimal that reads back as it (0.4f as 0.4,
+    /// not 0.4000000059604645), so that the core and the object's string
+    /// form show the texture's values as the user wrote them.
+    static double shortest(ScalarFloat x) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, "%.9g", (double) x);
+        for (int digits = 1; digits <= 9; ++digits) {
+            char b[32];
+            std::snprintf(b, sizeof b, "%.*g", digits, (double) x);
+            if ((ScalarFloat) std::strtod(b, nullptr) == x)
+                return std::strtod(b, nullptr);
+        }
+        return std::strtod(buf, nullptr);
     }
 
     static Param number(const char *name, double v, int id) {

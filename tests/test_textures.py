@@ -215,13 +215,46 @@ def test_height_map_gives_each_point_its_groove_depth(variant):
     assert not np.allclose(values[0], values[1], rtol=0.05)   # the depth matters here
 
 
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_sine_height_map_gives_each_point_its_height(variant):
+    """A sine grating whose height is a texture (a 2 x 2 map of 0.05 to
+    0.4 um): the programs are built for every height up to the map's
+    largest (`height_um_max`), and at each texel the grating is the one
+    with that height as a number; its samples fit its pdf there."""
+    mi = stam_mitsuba.setup(variant)
+    heights = [[0.05, 0.4], [0.2, 0.12]]
+    base = {'type': 'diffraction', 'surface': 'periodic', 'period_um': 1.2, 'profile': 'sine',
+            'coherence_um': 6.0, 'fresnel': 0.9, 'energy': 'stam'}
+    mapped = mi.load_dict({**base, 'height_um': sigma_map(mi, heights)})
+    assert 'height_um_max = 0.4 (from the texture)' in str(mapped), str(mapped)
+    values = []
+    for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
+                           ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75))):
+        number = mi.load_dict({**base, 'height_um': heights[row][col]})
+        # wo on the first order's peak near 550 nm (u = -0.46, v = 0)
+        got, want = (eval_at(mi, b, uv, wo=(-0.76, -0.2)) for b in (mapped, number))
+        assert want.max() > 0
+        assert np.allclose(got, want, rtol=2e-3, atol=1e-6 * want.max()), (uv, got, want)
+        values.append(got)
+    assert not np.allclose(values[0], values[1], rtol=0.05)   # the height matters here
+    from test_plugin import density_adapter, glossy_ctx
+    sample, pdf = density_adapter(mapped, [0.6, 0.0, 0.8], glossy_ctx(),
+                                  [450.0, 520.0, 590.0, 660.0] if mi.is_spectral else None,
+                                  uv=(0.75, 0.25))
+    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample,
+                                 pdf_func=pdf, sample_dim=3, sample_count=200000, res=101,
+                                 ires=32)
+    assert chi2.run(), chi2.messages
+
+
 def test_height_map_is_refused_where_it_cannot_go():
     mi = stam_mitsuba.setup('llvm_ad_rgb')
     with pytest.raises(Exception) as e:
         mi.load_dict({'type': 'diffraction', 'surface': 'periodic', 'period_um': 1.2,
-                      'coherence_um': 6.0, 'profile': 'sine',
+                      'coherence_um': 6.0, 'profile': '0, 0.1, 0.05',
                       'height_um': {'type': 'uniform', 'value': 0.1}})
-    assert "'height_um' takes a texture only with the rect profile" in str(e.value), str(e.value)
+    assert "'height_um' takes a texture only with the rect and sine profiles" in str(e.value), \
+        str(e.value)
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
@@ -233,6 +266,9 @@ def test_height_map_is_refused_where_it_cannot_go():
     ('height_um.value', {'surface': 'periodic', 'period_um': 1.2, 'profile': 'rect',
                          'width_um': 0.4, 'coherence_um': 6.0, 'fresnel': 0.9,
                          'height_um': {'type': 'uniform', 'value': 0.15}}, 0.004),
+    ('height_um.value', {'surface': 'periodic', 'period_um': 1.2, 'profile': 'sine',
+                         'coherence_um': 6.0, 'fresnel': 0.9, 'height_um_max': 0.3,
+                         'height_um': {'type': 'uniform', 'value': 0.2}}, 0.004),
 ])
 def test_map_values_are_differentiable(variant, key, bsdf, step):
     """d(mean of a render)/d(a map's value) against a central difference,

@@ -169,7 +169,8 @@ mod tests {
                 profile: Profile::Rect {
                     height_um: CD_BUMP_HEIGHT_UM,
                     width_um: CD_BUMP_WIDTH_UM
-                }
+                },
+                height_um_max: None,
             })
         );
         let cd = MaterialParams::from_json(
@@ -282,5 +283,20 @@ mod tests {
             r#"{"surface":"gaussian","sigma_um":0.1,"sigma_um_max":0.5,"corr_um":2}"#,
         )
         .unwrap();
+    }
+
+    #[test]
+    fn height_um_max_is_checked() {
+        let sine = r#"{"surface":"periodic","period_um":1.2,"coherence_um":6,"profile":"sine","height_um":0.2"#;
+        let m = message(&format!("{sine},\"height_um_max\":0.1}}"));
+        assert!(
+            m.contains("'height_um_max'") && m.contains("below 'height_um'"),
+            "{m}"
+        );
+        let m = message(&format!("{sine},\"height_um_max\":-1}}"));
+        assert!(m.contains("'height_um_max'"), "{m}");
+        let m = message(r#"{"surface":"cd","height_um_max":0.5}"#);
+        assert!(m.contains("'height_um_max'") && m.contains("sine"), "{m}");
+        MaterialParams::from_json(&format!("{sine},\"height_um_max\":0.5}}")).unwrap();
     }
 }

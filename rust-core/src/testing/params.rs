@@ -272,7 +272,8 @@ pub fn smooth(f: &[f64], scale: f64) -> bool {
 }
 
 /// The number of sweeps (of 12 lanes of large f, each channel) of the f64
-/// program along ln p in +-`span` (801 points) that are not smooth.
+/// program along ln p in +-`span` (801 points) that are not smooth (RGB
+/// lanes whose sweep reaches the gamut's boundary are passed over).
 pub fn rough_sweeps(case: &Case, kind: ProgramKind, id: ParamId, span: f64, ls: &[Lane]) -> usize {
     let p = exported(&case.brdf(case.params), kind).unwrap();
     let base = slot_values(&p, case, case.params);
@@ -293,6 +294,13 @@ pub fn rough_sweeps(case: &Case, kind: ProgramKind, id: ParamId, span: f64, ls: 
                 run(&p, kind, l, &v, true)
             })
             .collect();
+        // An RGB sweep along which a channel reaches 0 crosses the gamut
+        // map's boundary (a negative channel clamped, the others moved to
+        // keep the luminance): a kink of the native function itself, not
+        // of the program's tables.
+        if !kind.spectral() && sweeps.iter().flatten().any(|&v| v == 0.0) {
+            continue;
+        }
         let scale = sweeps.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
         for c in 0..sweeps[0].len() {
             let f: Vec<f64> = sweeps.iter().map(|s| s[c]).collect();

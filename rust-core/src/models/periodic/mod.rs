@@ -88,8 +88,11 @@ pub struct Periodic {
 
 impl Periodic {
     pub fn new(p: &PeriodicParams, fresnel: &Fresnel) -> Result<Periodic, StamError> {
-        let surface = PeriodicSurface::new(p.period_um, p.coherence_um, p.profile.clone())
+        let mut surface = PeriodicSurface::new(p.period_um, p.coherence_um, p.profile.clone())
             .map_err(StamError::new)?;
+        if let Some(max) = p.height_um_max {
+            surface = surface.with_height_texture(max).map_err(StamError::new)?;
+        }
         Ok(Periodic {
             surface,
             broad_reflectance: NodeReflectance::new(
@@ -256,6 +259,11 @@ pub struct PeriodicSurface {
     coherence_um: f64,
     profile: Profile,
     model: Model,
+    /// A sine profile with a height texture (`height_um_max`): the order
+    /// table at that largest height, which the programs read at beta
+    /// scaled by h / h_max for every height up to it (the native path
+    /// keeps `model`, built at the material's height).
+    texture_table: Option<(f64, OrderTable)>,
 }
 
 #[derive(Clone, Debug)]
@@ -407,7 +415,25 @@ impl PeriodicSurface {
             coherence_um,
             profile,
             model,
+            texture_table: None,
         })
+    }
+
+    /// The surface whose programs serve a sine profile's heights up to
+    /// `height_um_max` (a height texture's largest value).
+    pub fn with_height_texture(mut self, height_um_max: f64) -> Result<PeriodicSurface, String> {
+        let Profile::Sine { height_um } = self.profile else {
+            return Err("height_um_max applies to the sine profile only".into());
+        };
+        check_positive("height_um_max", height_um_max)?;
+        if height_um_max < height_um || height_um_max > 1e3 {
+            return Err(format!(
+                "height_um_max ({height_um_max}) must be at least height_um ({height_um}) and at most 1000 um"
+            ));
+        }
+        let n_phys = physical_order_limit(self.period_um, self.coherence_um);
+        self.texture_table = Some((height_um_max, sine_table(height_um_max, n_phys)?));
+        Ok(self)
     }
 
     pub fn period_um(&self) -> f64 {

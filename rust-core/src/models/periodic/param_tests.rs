@@ -88,7 +88,7 @@ fn periodic_rgb_profile_parameters_follow_the_changed_material() {
         let profile: Vec<ParamId> = ids
             .iter()
             .copied()
-            .filter(|id| matches!(id, HeightUm | WidthUm) && !case.name.starts_with("sine"))
+            .filter(|id| matches!(id, HeightUm | WidthUm))
             .collect();
         failures.extend(check(
             &case,
@@ -112,6 +112,82 @@ fn periodic_parameters_follow_the_changed_material() {
             PERIODIC,
             2000,
         ));
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// A sine grating with a height texture (`height_um_max` 0.6: the renderer
+/// gives the height per point through the programs' parameter).
+const TEXTURED_SINE: Case = Case {
+    name: "textured sine gold",
+    template: r#"{"surface":"periodic","period_um":$period_um,"coherence_um":$coherence_um,"profile":"sine","height_um":$height_um,"height_um_max":0.6,"fresnel":"gold"}"#,
+    params: &[(PeriodUm, 1.2), (CoherenceUm, 6.0), (HeightUm, 0.3)],
+    lanes: lanes_sine,
+};
+
+/// With a height texture the spectral and RGB programs, built at height
+/// 0.3 for every height up to 0.6, give the material of the point's height
+/// (0.03 to 0.6), and in RGB the height is differentiable and smooth.
+#[test]
+fn sine_height_texture_programs_serve_every_height_up_to_the_max() {
+    use crate::testing::params::changed;
+    let ls = lanes_sine(1500, 9);
+    let mut failures = Vec::new();
+    for kind in [ProgramKind::EvalSpectral, ProgramKind::EvalRgb] {
+        let tol = if kind.spectral() {
+            1e-4
+        } else {
+            PERIODIC_RGB.vs_native
+        };
+        for factor in [0.1, 0.5, 1.5, 2.0] {
+            let (vs_native, vs_program, checked) =
+                changed(&TEXTURED_SINE, kind, HeightUm, factor, &ls);
+            println!(
+                "{kind:?} height {:.3}: {checked} checked, max rel vs native {vs_native:.2e}, vs that material's program {vs_program:.2e}",
+                0.3 * factor
+            );
+            if !(vs_native <= tol && checked >= 50) {
+                failures.push(format!("{kind:?} x{factor}: {vs_native:.2e} ({checked})"));
+            }
+        }
+    }
+    failures.extend(check(
+        &TEXTURED_SINE,
+        &[ProgramKind::EvalRgb],
+        &[HeightUm],
+        PERIODIC_RGB,
+        2000,
+    ));
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// With a height texture the sampling programs read the point's height
+/// (the orders' weights follow it): their samples fit their pdf at heights
+/// 0.06 and 0.6.
+#[test]
+fn sine_height_texture_sampling_passes_chi_square() {
+    use crate::testing::chi2::chi2_fit;
+    use crate::testing::programs::ProgramSampler;
+    let b = TEXTURED_SINE.brdf(TEXTURED_SINE.params);
+    let mut failures = Vec::new();
+    let mut seed = 900;
+    for height in [0.06, 0.6] {
+        for cos in [1.0f64, 0.5] {
+            let wi = glam::DVec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+            for mode in [None, Some(550.0)] {
+                seed += 1;
+                let sampler = ProgramSampler::new(&b, wi, mode).with_param(HeightUm, height);
+                let fit = chi2_fit(&sampler, seed, 40_000);
+                println!(
+                    "chi2 height {height} cos {cos} {mode:?}: p = {:.4} (dof {}), integral {:.5}",
+                    fit.p_value, fit.dof, fit.integral
+                );
+                let again = || chi2_fit(&sampler, seed + 7_777_777, 160_000).p_value;
+                if fit.integral > 1.0 + 2e-3 || !(fit.p_value > 0.01 || again() > 0.01) {
+                    failures.push(format!("height {height} cos {cos} {mode:?}"));
+                }
+            }
+        }
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }

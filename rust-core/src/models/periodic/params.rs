@@ -29,6 +29,10 @@ pub struct PeriodicParams {
     pub period_um: f64,
     pub coherence_um: f64,
     pub profile: Profile,
+    /// A height texture's largest value (`height_um_max`, sine profile):
+    /// the programs then read the height per point and serve every height
+    /// up to this.
+    pub height_um_max: Option<f64>,
 }
 
 fn err(msg: String) -> StamError {
@@ -51,6 +55,7 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, Stam
         "profile",
         "height_um",
         "width_um",
+        "height_um_max",
     ])?;
     let defaults = |v: f64| if compact_disc { Some(v) } else { None };
     let period_um = match r.ranged("period_um", range::PERIOD_UM, false, " um")? {
@@ -158,10 +163,27 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, Stam
             )))
         }
     };
+    let height_um_max = r.ranged("height_um_max", range::HEIGHT_UM, true, " um")?;
+    if let Some(max) = height_um_max {
+        match &profile {
+            Profile::Sine { height_um } if max < *height_um => {
+                return Err(err(format!(
+                    "parameter 'height_um_max' ({max}) is below 'height_um' ({height_um}): it is the largest value a height texture gives"
+                )))
+            }
+            Profile::Sine { .. } => {}
+            _ => {
+                return Err(err(
+                    "parameter 'height_um_max' applies to profile 'sine' only (a rect profile's powers are a closed form in the height; a tabulated profile has no height parameter)".into(),
+                ))
+            }
+        }
+    }
     Ok(PeriodicParams {
         period_um,
         coherence_um,
         profile,
+        height_um_max,
     })
 }
 

@@ -57,15 +57,20 @@ pub(super) enum PowerAt<'a> {
 }
 
 impl PowerProgram {
+    /// The powers of `surface` as its programs read them: a height
+    /// texture's table (`texture_table`) where it has one.
     pub(super) fn new(b: &Builder, surface: &PeriodicSurface) -> PowerProgram {
-        match &surface.model {
-            Model::Rect {
-                height_um, fill, ..
-            } => PowerProgram::Rect {
+        match (&surface.texture_table, &surface.model) {
+            (
+                None,
+                Model::Rect {
+                    height_um, fill, ..
+                },
+            ) => PowerProgram::Rect {
                 height_um: *height_um,
                 fill: *fill,
             },
-            Model::Table(t) => {
+            (Some((_, t)), _) | (None, Model::Table(t)) => {
                 let complex = !t.symmetric;
                 let h = t.step;
                 let scale = [1.0, h, 0.5 * h * h];
@@ -410,9 +415,12 @@ impl PeriodicSurface {
                 height: b.param(ParamId::HeightUm, height_um),
                 fill: b.param(ParamId::WidthUm, width_um) / period,
             },
-            Profile::Sine { height_um } => ProfileProgram::Scaled(Some(
-                b.param(ParamId::HeightUm, height_um) * (1.0 / height_um),
-            )),
+            Profile::Sine { height_um } => {
+                // The table's height: a height texture's largest, else the
+                // material's.
+                let built = self.texture_table.as_ref().map_or(height_um, |t| t.0);
+                ProfileProgram::Scaled(Some(b.param(ParamId::HeightUm, height_um) * (1.0 / built)))
+            }
             Profile::Tabulated { .. } => ProfileProgram::Scaled(None),
         }
     }

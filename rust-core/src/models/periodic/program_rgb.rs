@@ -506,15 +506,11 @@ impl Periodic {
         let p = &self.surface;
         let plan = RgbPlan::new(p)?;
         let powers = PowerProgram::new(b, p);
-        // The rect profile's height and width as parameters; the period and
-        // coherence stay the built ones (the smoothed weight's levels and
-        // the orders' plan are built for them), and so does a sine
-        // profile's height (its RGB powers, a cubic Hermite in beta, showed
-        // kinks along a +-5% sweep of the height on 3 of 2,000 lanes).
-        let profile = match p.profile_program(b, b.c(p.period_um)) {
-            rect @ ProfileProgram::Rect { .. } => rect,
-            ProfileProgram::Scaled(_) => ProfileProgram::Scaled(None),
-        };
+        // The profile's height (and a rect's width) as parameters, as in
+        // the spectral kernel; the period and coherence stay the built ones
+        // (the smoothed weight's levels and the orders' plan are built for
+        // them).
+        let profile = p.profile_program(b, b.c(p.period_um));
         // |c_n|^2 at beta for an order's part prepared once per order
         let power_rgb =
             |beta: Value<'a>, n: Value<'a>, rect: Option<RectOrder<'a>>| match (profile, rect) {
