@@ -87,6 +87,24 @@ def sigma_map(mi, values, **extra):
             'filter_type': 'nearest', **extra}
 
 
+TEXELS = (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
+          ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75)))
+
+
+def texels_match_numbers(mi, mapped, base, key, grid, rtol, atol, wo=(-0.1, -0.5)):
+    """At each texel of a 2 x 2 map on parameter `key`, the mapped material
+    evaluates (at wo) as `base` with that texel's value as a number; the
+    evaluations, texel by texel."""
+    values = []
+    for (row, col), uv in TEXELS:
+        number = mi.load_dict({**base, key: grid[row][col]})
+        got, want = (eval_at(mi, b, uv, wo=wo) for b in (mapped, number))
+        assert want.max() > 0
+        assert np.allclose(got, want, rtol=rtol, atol=atol * want.max()), (uv, got, want)
+        values.append(got)
+    return values
+
+
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 @pytest.mark.parametrize('fresnel', [0.9, 'gold'])
 def test_sigma_map_gives_each_point_its_sigma(variant, fresnel):
@@ -100,13 +118,7 @@ def test_sigma_map_gives_each_point_its_sigma(variant, fresnel):
             'energy': 'stam'}
     mapped = mi.load_dict({**base, 'sigma_um': sigma_map(mi, SMOOTH_TO_ROUGH)})
     assert 'sigma_um_max = 0.5 (from the texture)' in str(mapped)
-    values = []
-    for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
-                           ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75))):
-        number = mi.load_dict({**base, 'sigma_um': SMOOTH_TO_ROUGH[row][col]})
-        got, want = eval_at(mi, mapped, uv), eval_at(mi, number, uv)
-        assert np.allclose(got, want, rtol=2e-4, atol=1e-7 * want.max()), (uv, got, want)
-        values.append(got)
+    values = texels_match_numbers(mi, mapped, base, 'sigma_um', SMOOTH_TO_ROUGH, 2e-4, 1e-7)
     assert not np.allclose(values[0], values[3], rtol=0.1)   # sigma matters here
 
 
@@ -203,15 +215,9 @@ def test_height_map_gives_each_point_its_groove_depth(variant):
     base = {'type': 'diffraction', 'surface': 'cd', 'coherence_um': 10.0, 'fresnel': 0.9,
             'energy': 'stam'}
     mapped = mi.load_dict({**base, 'height_um': sigma_map(mi, heights)})
-    values = []
-    for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
-                           ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75))):
-        number = mi.load_dict({**base, 'height_um': heights[row][col]})
-        # wo on the first order's peak near 520 nm (u = -0.2, v = 0)
-        got, want = (eval_at(mi, b, uv, wo=(-0.1, -0.2)) for b in (mapped, number))
-        assert want.max() > 0
-        assert np.allclose(got, want, rtol=1e-3, atol=1e-6 * want.max()), (uv, got, want)
-        values.append(got)
+    # wo on the first order's peak near 520 nm (u = -0.2, v = 0)
+    values = texels_match_numbers(mi, mapped, base, 'height_um', heights, 1e-3, 1e-6,
+                                  wo=(-0.1, -0.2))
     assert not np.allclose(values[0], values[1], rtol=0.05)   # the depth matters here
 
 
@@ -227,15 +233,9 @@ def test_sine_height_map_gives_each_point_its_height(variant):
             'coherence_um': 6.0, 'fresnel': 0.9, 'energy': 'stam'}
     mapped = mi.load_dict({**base, 'height_um': sigma_map(mi, heights)})
     assert 'height_um_max = 0.4 (from the texture)' in str(mapped), str(mapped)
-    values = []
-    for (row, col), uv in (((0, 0), (0.25, 0.25)), ((0, 1), (0.75, 0.25)),
-                           ((1, 0), (0.25, 0.75)), ((1, 1), (0.75, 0.75))):
-        number = mi.load_dict({**base, 'height_um': heights[row][col]})
-        # wo on the first order's peak near 550 nm (u = -0.46, v = 0)
-        got, want = (eval_at(mi, b, uv, wo=(-0.76, -0.2)) for b in (mapped, number))
-        assert want.max() > 0
-        assert np.allclose(got, want, rtol=2e-3, atol=1e-6 * want.max()), (uv, got, want)
-        values.append(got)
+    # wo on the first order's peak near 550 nm (u = -0.46, v = 0)
+    values = texels_match_numbers(mi, mapped, base, 'height_um', heights, 2e-3, 1e-6,
+                                  wo=(-0.76, -0.2))
     assert not np.allclose(values[0], values[1], rtol=0.05)   # the height matters here
     from test_plugin import density_adapter, glossy_ctx
     sample, pdf = density_adapter(mapped, [0.6, 0.0, 0.8], glossy_ctx(),
