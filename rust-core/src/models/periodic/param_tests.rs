@@ -163,7 +163,7 @@ fn sine_height_texture_programs_serve_every_height_up_to_the_max() {
 
 /// With a height texture the sampling programs read the point's height
 /// (the orders' weights follow it): their samples fit their pdf at heights
-/// 0.06 and 0.6.
+/// 0.06 and 0.6, normal and oblique incidence.
 #[test]
 fn sine_height_texture_sampling_passes_chi_square() {
     use crate::testing::chi2::chi2_fit;
@@ -171,22 +171,24 @@ fn sine_height_texture_sampling_passes_chi_square() {
     let b = TEXTURED_SINE.brdf(TEXTURED_SINE.params);
     let mut failures = Vec::new();
     let mut seed = 900;
-    for height in [0.06, 0.6] {
-        for cos in [1.0f64, 0.5] {
-            let wi = glam::DVec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
-            for mode in [None, Some(550.0)] {
-                seed += 1;
-                let sampler = ProgramSampler::new(&b, wi, mode).with_param(HeightUm, height);
-                let fit = chi2_fit(&sampler, seed, 40_000);
-                println!(
-                    "chi2 height {height} cos {cos} {mode:?}: p = {:.4} (dof {}), integral {:.5}",
-                    fit.p_value, fit.dof, fit.integral
-                );
-                let again = || chi2_fit(&sampler, seed + 7_777_777, 160_000).p_value;
-                if fit.integral > 1.0 + 2e-3 || !(fit.p_value > 0.01 || again() > 0.01) {
-                    failures.push(format!("height {height} cos {cos} {mode:?}"));
-                }
-            }
+    // Each height at both incidences, RGB at one and 550 nm at the other.
+    for (height, cos, mode) in [
+        (0.06, 1.0f64, None),
+        (0.06, 0.5, Some(550.0)),
+        (0.6, 1.0, Some(550.0)),
+        (0.6, 0.5, None),
+    ] {
+        let wi = glam::DVec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+        seed += 1;
+        let sampler = ProgramSampler::new(&b, wi, mode).with_param(HeightUm, height);
+        let fit = chi2_fit(&sampler, seed, 40_000);
+        println!(
+            "chi2 height {height} cos {cos} {mode:?}: p = {:.4} (dof {}), integral {:.5}",
+            fit.p_value, fit.dof, fit.integral
+        );
+        let again = || chi2_fit(&sampler, seed + 7_777_777, 160_000).p_value;
+        if fit.integral > 1.0 + 2e-3 || !(fit.p_value > 0.01 || again() > 0.01) {
+            failures.push(format!("height {height} cos {cos} {mode:?}"));
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
