@@ -247,6 +247,26 @@ def test_sine_height_map_gives_each_point_its_height(variant):
     assert chi2.run(), chi2.messages
 
 
+@pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
+def test_sine_height_map_bad_values_give_finite_results(variant):
+    """A sine grating's height map: negative, zero and NaN values read as a
+    flat surface (height 0, a mirror's order 0 only); values above the given
+    height_um_max as that maximum."""
+    mi = stam_mitsuba.setup(variant)
+    base = {'type': 'diffraction', 'surface': 'periodic', 'period_um': 1.2, 'profile': 'sine',
+            'coherence_um': 6.0, 'fresnel': 0.9, 'energy': 'stam'}
+    bad = mi.load_dict({**base, 'height_um_max': 0.3,
+                        'height_um': sigma_map(mi, [[-0.3, 0.0], [float('nan'), 0.9]])})
+    wo = (-0.76, -0.2)   # on the first order's peak
+    for uv in ((0.25, 0.25), (0.75, 0.25), (0.25, 0.75)):
+        got = eval_at(mi, bad, uv, wo=wo)
+        assert np.all(np.isfinite(got)) and np.all(got >= 0), (uv, got)
+        assert got.max() < 1e-3 * eval_at(mi, bad, (0.75, 0.75), wo=wo).max(), (uv, got)
+    capped = mi.load_dict({**base, 'height_um': 0.3})
+    assert np.allclose(eval_at(mi, bad, (0.75, 0.75), wo=wo),
+                       eval_at(mi, capped, (0.75, 0.75), wo=wo), rtol=2e-3)
+
+
 def test_height_map_is_refused_where_it_cannot_go():
     mi = stam_mitsuba.setup('llvm_ad_rgb')
     with pytest.raises(Exception) as e:
