@@ -5,8 +5,9 @@
  * programs read these parameters (`Op::Param`) and are built for every
  * value up to the texture's largest (a Gaussian's `sigma_um_max`, a sine
  * profile's `height_um_max`; a rect profile's powers are a closed form in
- * the height); this header gives each lane the texture's value there. The twist map is diffraction.cpp's (a frame
- * rotation, every variant). No physics.
+ * the height); this header gives each lane the texture's value there.
+ * The twist map is diffraction.cpp's (a frame rotation, every variant). No
+ * physics.
  */
 #pragma once
 
@@ -155,15 +156,13 @@ private:
     /// not 0.4000000059604645), so that the core and the object's string
     /// form show the texture's values as the user wrote them.
     static double shortest(ScalarFloat x) {
-        char buf[32];
-        std::snprintf(buf, sizeof buf, "%.9g", (double) x);
-        for (int digits = 1; digits <= 9; ++digits) {
-            char b[32];
+        // 9 significant digits always read back as the float
+        char b[32];
+        for (int digits = 1;; ++digits) {
             std::snprintf(b, sizeof b, "%.*g", digits, (double) x);
-            if ((ScalarFloat) std::strtod(b, nullptr) == x)
+            if (digits == 9 || (ScalarFloat) std::strtod(b, nullptr) == x)
                 return std::strtod(b, nullptr);
         }
-        return std::strtod(buf, nullptr);
     }
 
     static Param number(const char *name, double v, int id) {

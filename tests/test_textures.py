@@ -30,6 +30,9 @@ BRUSHED = {'type': 'diffraction', 'surface': 'gaussian', 'sigma_um': 0.1, 'corr_
            'corr_y_um': 3.0}
 
 
+WAVELENGTHS = [450.0, 520.0, 590.0, 660.0]   # a spectral path's, in these tests
+
+
 def eval_at(mi, bsdf, uv, wo=(-0.1, -0.5)):
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wi = mi.Vector3f(0.3, 0.2, math.sqrt(1 - 0.13))
@@ -38,7 +41,7 @@ def eval_at(mi, bsdf, uv, wo=(-0.1, -0.5)):
     si.dp_dv = mi.Vector3f(0, 1, 0)
     si.uv = mi.Point2f(*uv)
     if mi.is_spectral:
-        si.wavelengths = [450.0, 520.0, 590.0, 660.0]
+        si.wavelengths = WAVELENGTHS
     wo = mi.Vector3f(wo[0], wo[1], math.sqrt(1 - wo[0] ** 2 - wo[1] ** 2))
     return np.array(bsdf.eval(mi.BSDFContext(), si, wo), dtype=np.float64).ravel()
 
@@ -105,6 +108,18 @@ def texels_match_numbers(mi, mapped, base, key, grid, rtol, atol, wo=(-0.1, -0.5
     return values
 
 
+def samples_fit_pdf_at(mi, bsdf, uv, ires, wi=(0.6, 0.0, 0.8)):
+    """Chi-square of the glossy samples against the pdf at texture point
+    uv (test_plugin's adapter; `ires` integration points per cell)."""
+    from test_plugin import density_adapter, glossy_ctx
+    sample, pdf = density_adapter(bsdf, list(wi), glossy_ctx(),
+                                  WAVELENGTHS if mi.is_spectral else None, uv=uv)
+    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample,
+                                 pdf_func=pdf, sample_dim=3, sample_count=200000, res=101,
+                                 ires=ires)
+    assert chi2.run(), chi2.messages
+
+
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 @pytest.mark.parametrize('fresnel', [0.9, 'gold'])
 def test_sigma_map_gives_each_point_its_sigma(variant, fresnel):
@@ -137,7 +152,7 @@ def test_sigma_map_samples_weigh_f_cos_over_pdf(variant):
     si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
     si.uv = mi.Point2f(rng.uniform(0, 1, n), rng.uniform(0, 1, n))
     if mi.is_spectral:
-        si.wavelengths = [450.0, 520.0, 590.0, 660.0]
+        si.wavelengths = WAVELENGTHS
     ctx = mi.BSDFContext(mi.TransportMode.Radiance, mi.BSDFFlags.GlossyReflection)
     bs, weight = bsdf.sample(ctx, si, mi.Float(rng.uniform(0, 1, n)),
                              mi.Point2f(rng.uniform(0, 1, n), rng.uniform(0, 1, n)))
@@ -174,17 +189,9 @@ def test_sigma_map_samples_follow_the_points_sigma(variant):
     sigma (0.08 um) is far from the map's mean (0.395 um, the built one):
     the sampling program reads the point's sigma, as the pdf does."""
     mi = stam_mitsuba.setup(variant)
-    from test_plugin import density_adapter, glossy_ctx
     bsdf = mi.load_dict({'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0,
                          'fresnel': 0.9, 'sigma_um': sigma_map(mi, [[0.08, 0.5], [0.5, 0.5]])})
-    wi = [0.6, 0.0, 0.8]
-    sample, pdf = density_adapter(bsdf, wi, glossy_ctx(),
-                                  [450.0, 520.0, 590.0, 660.0] if mi.is_spectral else None,
-                                  uv=(0.25, 0.25))
-    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample,
-                                 pdf_func=pdf, sample_dim=3, sample_count=200000, res=101,
-                                 ires=8)
-    assert chi2.run(), chi2.messages
+    samples_fit_pdf_at(mi, bsdf, (0.25, 0.25), ires=8)
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
@@ -237,14 +244,8 @@ def test_sine_height_map_gives_each_point_its_height(variant):
     values = texels_match_numbers(mi, mapped, base, 'height_um', heights, 2e-3, 1e-6,
                                   wo=(-0.76, -0.2))
     assert not np.allclose(values[0], values[1], rtol=0.05)   # the height matters here
-    from test_plugin import density_adapter, glossy_ctx
-    sample, pdf = density_adapter(mapped, [0.6, 0.0, 0.8], glossy_ctx(),
-                                  [450.0, 520.0, 590.0, 660.0] if mi.is_spectral else None,
-                                  uv=(0.75, 0.25))
-    chi2 = mi.chi2.ChiSquareTest(domain=mi.chi2.SphericalDomain(), sample_func=sample,
-                                 pdf_func=pdf, sample_dim=3, sample_count=200000, res=101,
-                                 ires=32)
-    assert chi2.run(), chi2.messages
+    # Gratings' peaks need 32 integration points per cell (test_plugin)
+    samples_fit_pdf_at(mi, mapped, (0.75, 0.25), ires=32)
 
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])

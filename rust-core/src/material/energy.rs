@@ -105,10 +105,11 @@ pub const MAX_NODES: usize = 32;
 
 /// m(wi, lambda) m(wo, lambda) times the horizon taper of one pair, at any
 /// wavelength (linear between the table's nodes). The products at every
-/// node are made on the first `at`, then kept: most RGB evaluations of a grating ask for no
-/// wavelength (no order's peak in the band: 0.09 calls per evaluation of
-/// the compact disc at uniform random pairs), one on a peak for about 18
-/// (three per order, 32 for a broad zeroth order) spread over most nodes.
+/// node are made on the first `at`, then kept: most RGB evaluations of a
+/// grating ask for no wavelength (no order's peak in the band: 0.09 calls
+/// per evaluation of the compact disc at uniform random pairs), one on a
+/// peak for about 18 (three per order, 32 for a broad zeroth order) spread
+/// over most nodes.
 pub struct PairEnergy<'a> {
     table: &'a EnergyTable,
     wi: DVec3,

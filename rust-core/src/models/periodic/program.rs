@@ -169,7 +169,6 @@ impl PowerProgram {
                 // sinc^2(pi n f) computed, not gathered from the native
                 // table (a gather loads lane by lane on a CPU: slower than
                 // one sine); the same values to f32 rounding.
-                let _ = b;
                 RectOrder::new(b.c(*fill), n).power(*s2)
             }
             (

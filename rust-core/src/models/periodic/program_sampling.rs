@@ -148,15 +148,13 @@ impl Periodic {
         let w = wi[2] + z;
         let gw2 = (one_plus_dot * one_plus_dot / (wi[2] * z * w * w)).min(GW2_CAP);
         let beta = -(2000.0 * PI) * w / lambda;
-        // A height texture's table is read at the point's height (scaled
-        // beta), so that the orders' weights follow it.
-        let beta = match self.surface.texture_table {
-            Some(_) => self
-                .surface
-                .profile_program(b, b.c(self.surface.period_um))
-                .scaled_beta(beta),
-            None => beta,
-        };
+        // A sine profile's table is read at the point's height (scaled
+        // beta, as the evals read it), so that the orders' weights follow
+        // it (a height texture's above all); other profiles keep beta.
+        let beta = self
+            .surface
+            .profile_program(b, b.c(self.surface.period_um))
+            .scaled_beta(beta);
         let weight = powers.power_rgb(b, beta, n) * gw2;
         weight.finite_non_negative()
     }
