@@ -30,7 +30,7 @@ STAM_LIB  ?= $(STAM_LIB_DEFAULT)
 STAM_H    := rust-core/include/stam.h
 PLUGIN_SO := $(BUILD)/plugins/diffraction.so
 PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
-PLUGIN_HDR := mitsuba-plugin/batch.h mitsuba-plugin/params_json.h mitsuba-plugin/program.h \
+PLUGIN_HDR := mitsuba-plugin/batch.h mitsuba-plugin/code_version.h mitsuba-plugin/params_json.h mitsuba-plugin/program.h \
               mitsuba-plugin/jit_path.h mitsuba-plugin/plugin_params.h mitsuba-plugin/shape_kind.h \
               mitsuba-plugin/param_textures.h
 # The mitsuba and drjit versions the plugin is compiled against (JSON); the

@@ -35,6 +35,7 @@
 
 #include "../rust-core/include/stam.h"
 #include "batch.h"
+#include "code_version.h"
 #include "jit_path.h"
 #include "params_json.h"
 #include "plugin_params.h"
@@ -609,24 +610,13 @@ private:
         }
     }
 
-    /// JIT variants: every parameter the programs read, by id, as one
-    /// array in memory (Program::run's `params`): the user's value where
-    /// given (mi.traverse's, with its gradient), else the programs' own.
-    /// Being read from memory, a new value changes no kernel.
+    /// JIT variants: the parameter array for the current programs
+    /// (plugin_params.h); the built values' programs into or out of use
+    /// change the code (code_version.h)
     void update_param_array() {
-        if constexpr (dr::is_jit_v<Float>) {
-            std::vector<float> built = m_jit.built_values();
-            Float a = dr::zeros<Float>(STAM_PARAMS);
-            for (uint32_t id = 0; id < STAM_PARAMS; ++id)
-                if (!std::isnan(built[id]))
-                    dr::scatter(a, Float(built[id]), UInt32(id));
-            for (const Param &p : m_params)
-                if (p.kind == Param::Number && p.id >= 0 && !std::isnan(built[p.id]))
-                    dr::scatter(a, p.diff, UInt32((uint32_t) p.id));
-            dr::make_opaque(a);
-            m_param_array = a;
-            m_built = std::move(built);
-        }
+        if constexpr (dr::is_jit_v<Float>)
+            if (m_param_array.update(m_jit.built_values(), m_params))
+                m_code_version.bump();
     }
 
     /// JIT variants, an update that changes only parameters the programs
@@ -643,11 +633,12 @@ private:
                     continue; // read per point, or from memory
                 auto it = std::find_if(m_params.begin(), m_params.end(),
                                        [&](const Param &p) { return p.name == k; });
-                if (it == m_params.end() || it->kind != Param::Number || it->id < 0 ||
-                    m_built.empty() || std::isnan(m_built[it->id]))
+                if (it == m_params.end() || it->kind != Param::Number ||
+                    std::isnan(m_param_array.built(it->id)))
                     return false;
+                float built = m_param_array.built(it->id);
                 ScalarFloat v = scalar_of(it->diff, it->name);
-                if (!(std::abs(v / m_built[it->id] - 1.f) <= MaxDriftWithoutRebuild))
+                if (!(std::abs(v / built - 1.f) <= MaxDriftWithoutRebuild))
                     return false;
             }
             for (Param &p : m_params)
@@ -738,6 +729,7 @@ private:
         if constexpr (dr::is_jit_v<Float>) {
             m_tables = c.jit.load_tables();
             m_jit = std::move(c.jit);
+            m_code_version.bump(); // code_version.h
             update_param_array();
             settle_twist();
         }
@@ -927,8 +919,11 @@ private:
                    const Float *sample1, const Point2f *sample2, bool want_value,
                    bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
-        typename Jit::Params params{ m_param_array, {} };
+        typename Jit::Params params{ m_param_array.array(), {} };
         m_textures.apply(params, si, st.active_e || st.active_s);
+        // The built values, from memory, without a gradient or a texture:
+        // the core's programs for that case may run (jit_path.h)
+        params.at_built = m_param_array.at_built() && !params.any_per_point();
         if (st.do_eval) {
             if (want_value)
                 q.value = dr::select(st.active_e,
@@ -977,17 +972,18 @@ private:
     // array (traversed, so that dr.freeze sees them)
     Jit m_jit;
     FloatStorage m_tables;
-    // Every parameter the programs read, by id (update_param_array), and
-    // the values they were built with (NaN: not read)
-    Float m_param_array;
-    std::vector<float> m_built;
+    // Every parameter the programs read (plugin_params.h)
+    diffraction_detail::ParamArray<Float> m_param_array;
+    // Changes of the programs, shown to dr.freeze (code_version.h)
+    diffraction_detail::CodeVersion<Float> m_code_version;
     /// An update moving a parameter the programs read by at most this
     /// (relative) keeps the programs (update_without_rebuild): their error
     /// against the rebuilt material stays below 1e-4, 1.1e-3 for the RGB
     /// table of isotropic metals (docs/jit.md, "Parameters")
     static constexpr ScalarFloat MaxDriftWithoutRebuild = 0.02f;
 
-    MI_TRAVERSE_CB(Base, m_tables, m_param_array, m_twist_diff)
+    MI_TRAVERSE_CB_WITH_VERSION(Base, m_code_version, m_tables, m_param_array.array(),
+                                m_twist_diff)
 };
 
 MI_EXPORT_PLUGIN(Diffraction)

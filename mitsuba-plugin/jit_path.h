@@ -55,18 +55,30 @@ public:
             uint32_t code;
             const char *name;
             size_t inputs, outputs;
-            Prog *dst;
+            Prog *dst, *at_built;
         };
         const Kind kinds[] = {
             { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB,
-              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.m_eval },
+              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.m_eval,
+              &j.m_eval_at_built },
             { sp ? STAM_PROGRAM_PDF_SPECTRAL : STAM_PROGRAM_PDF_RGB,
-              sp ? "PDF_SPECTRAL" : "PDF_RGB", sp ? 7u : 6u, 1u, &j.m_pdf },
+              sp ? "PDF_SPECTRAL" : "PDF_RGB", sp ? 7u : 6u, 1u, &j.m_pdf, &j.m_pdf_at_built },
             { sp ? STAM_PROGRAM_SAMPLE_SPECTRAL : STAM_PROGRAM_SAMPLE_RGB,
-              sp ? "SAMPLE_SPECTRAL" : "SAMPLE_RGB", sp ? 7u : 6u, 4u, &j.m_sample },
+              sp ? "SAMPLE_SPECTRAL" : "SAMPLE_RGB", sp ? 7u : 6u, 4u, &j.m_sample,
+              &j.m_sample_at_built },
             { sp ? STAM_PROGRAM_COHERENT_SPECTRAL : STAM_PROGRAM_COHERENT_RGB,
               sp ? "COHERENT_SPECTRAL" : "COHERENT_RGB", sp ? 4u : 3u, sp ? 2u : 4u,
-              &j.m_coherent },
+              &j.m_coherent, &j.m_coherent_at_built },
+        };
+        auto checked = [&](const Kind &k, const std::vector<float> &v) {
+            Prog p(v, j.m_host_tables);
+            if (p.n_inputs() != k.inputs || p.n_outputs() != k.outputs)
+                throw program::Malformed(
+                    std::string(k.name) + " takes " + std::to_string(p.n_inputs()) +
+                    " inputs and gives " + std::to_string(p.n_outputs()) +
+                    " outputs, stam.h says " + std::to_string(k.inputs) + " and " +
+                    std::to_string(k.outputs));
+            return p;
         };
         std::string missing;
         try {
@@ -76,14 +88,12 @@ public:
                     missing += (missing.empty() ? "" : ", ") + std::string(k.name);
                     continue;
                 }
-                Prog p(v, j.m_host_tables);
-                if (p.n_inputs() != k.inputs || p.n_outputs() != k.outputs)
-                    throw program::Malformed(
-                        std::string(k.name) + " takes " + std::to_string(p.n_inputs()) +
-                        " inputs and gives " + std::to_string(p.n_outputs()) +
-                        " outputs, stam.h says " + std::to_string(k.inputs) + " and " +
-                        std::to_string(k.outputs));
-                *k.dst = std::move(p);
+                *k.dst = checked(k, v);
+                // Where the core has one, the kind's program for the built
+                // parameters (run while they are: `Params::at_built`)
+                v = program::export_program(core, k.code | STAM_PROGRAM_AT_BUILT);
+                if (!v.empty())
+                    *k.at_built = checked(k, v);
             }
         } catch (const program::Malformed &e) {
             throw ParamError(std::string("the core's program is unusable (a plugin built "
@@ -132,6 +142,9 @@ public:
         for (size_t k = 0; k < 4; ++k)
             os << names[k] << " " << progs[k]->n_instructions() << " ops "
                << progs[k]->n_gathers() << " gathers, ";
+        if (m_eval_at_built.valid())
+            os << "eval at the built parameters " << m_eval_at_built.n_instructions()
+               << " ops " << m_eval_at_built.n_gathers() << " gathers, ";
         os << "tables " << table_values << " values";
     }
 
@@ -142,11 +155,13 @@ public:
         if constexpr (IsSpectral) {
             UnpolarizedSpectrum f;
             for (size_t j = 0; j < NW; ++j)
-                f[j] = m_eval.run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
+                f[j] = pick(m_eval, m_eval_at_built, params)
+                           .run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
             return f;
         } else {
             DRJIT_MARK_USED(wl);
-            return from_rgb(m_eval.run(inputs(wi, &wo, {}), tables, params));
+            return from_rgb(
+                pick(m_eval, m_eval_at_built, params).run(inputs(wi, &wo, {}), tables, params));
         }
     }
 
@@ -157,11 +172,12 @@ public:
         if constexpr (IsSpectral) {
             Float p = 0.f;
             for (size_t j = 0; j < NW; ++j)
-                p += m_pdf.run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
+                p += pick(m_pdf, m_pdf_at_built, params)
+                         .run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
             return p * (1.f / NW);
         } else {
             DRJIT_MARK_USED(wl);
-            return m_pdf.run(inputs(wi, &wo, {}), tables, params)[0];
+            return pick(m_pdf, m_pdf_at_built, params).run(inputs(wi, &wo, {}), tables, params)[0];
         }
     }
 
@@ -179,11 +195,13 @@ public:
             Float lambda = wl[0];
             for (size_t k = 1; k < NW; ++k)
                 lambda = dr::select(j == (float) k, wl[k], lambda);
-            o = m_sample.run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }),
-                             tables, params);
+            o = pick(m_sample, m_sample_at_built, params)
+                    .run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }), tables,
+                         params);
         } else {
             DRJIT_MARK_USED(wl);
-            o = m_sample.run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables, params);
+            o = pick(m_sample, m_sample_at_built, params)
+                    .run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables, params);
         }
         return { Vector3f(o[0], o[1], o[2]), o[3] > .5f };
     }
@@ -198,19 +216,27 @@ public:
             UnpolarizedSpectrum r;
             Float p = 0.f;
             for (size_t j = 0; j < NW; ++j) {
-                std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, { wl[j] }), tables, params);
+                std::vector<Float> o = pick(m_coherent, m_coherent_at_built, params)
+                                           .run(inputs(wi, nullptr, { wl[j] }), tables, params);
                 r[j] = o[0];
                 p += o[1];
             }
             return { r, p * (1.f / NW) };
         } else {
             DRJIT_MARK_USED(wl);
-            std::vector<Float> o = m_coherent.run(inputs(wi, nullptr, {}), tables, params);
+            std::vector<Float> o =
+                pick(m_coherent, m_coherent_at_built, params).run(inputs(wi, nullptr, {}), tables, params);
             return { from_rgb(o), o[3] };
         }
     }
 
 private:
+    /// The kind's program for the built parameters where there is one and
+    /// the parameters are those (`params.at_built`), else the plain one
+    static const Prog &pick(const Prog &plain, const Prog &at_built, const Params &params) {
+        return params.at_built && at_built.valid() ? at_built : plain;
+    }
+
     /// The inputs of a program: the directions (core frame), then extras
     static std::vector<Float> inputs(const Vector3f &a, const Vector3f *b,
                                      std::initializer_list<Float> extra) {
@@ -235,6 +261,8 @@ private:
     }
 
     Prog m_eval, m_pdf, m_sample, m_coherent;
+    /// Each kind's program for the built parameters, where the core has one
+    Prog m_eval_at_built, m_pdf_at_built, m_sample_at_built, m_coherent_at_built;
     program::TableStorage m_host_tables;
 };
 

@@ -175,5 +175,55 @@ inline std::vector<std::string> lines_of(const std::string &text) {
     return out;
 }
 
+/// JIT variants: every parameter the material's programs read, by
+/// STAM_PARAM_* id, as one array in memory (Program::run's `params`): the
+/// user's value where given (mi.traverse's, with its gradient), else the
+/// programs' own. Being read from memory, a new value changes no kernel.
+template <typename Float> class ParamArray {
+public:
+    using UInt32 = dr::uint32_array_t<Float>;
+
+    /// The array for the programs' built values `built` (NaN: not read) and
+    /// the user's parameters; returns whether the built values' programs
+    /// (STAM_PROGRAM_AT_BUILT) came into or out of use.
+    bool update(std::vector<float> built, const std::vector<PluginParam<Float>> &params) {
+        using P = PluginParam<Float>;
+        Float a = dr::zeros<Float>(STAM_PARAMS);
+        for (uint32_t id = 0; id < STAM_PARAMS; ++id)
+            if (!std::isnan(built[id]))
+                dr::scatter(a, Float(built[id]), UInt32(id));
+        bool at_built = true;
+        for (const P &p : params)
+            if (p.kind == P::Number && p.id >= 0 && !std::isnan(built[p.id])) {
+                dr::scatter(a, p.diff, UInt32((uint32_t) p.id));
+                at_built &= p.value == built[p.id];
+            }
+        dr::make_opaque(a);
+        m_array = a;
+        m_built = std::move(built);
+        bool changed = at_built != m_at_built;
+        m_at_built = at_built;
+        return changed;
+    }
+
+    /// The value the programs were built with of parameter `id` (NaN: not
+    /// read, or nothing built)
+    float built(int id) const {
+        return id >= 0 && (size_t) id < m_built.size() ? m_built[id] : std::nanf("");
+    }
+
+    /// Every value is the built one and none carries a gradient: the built
+    /// values' programs may run
+    bool at_built() const { return m_at_built && !dr::grad_enabled(m_array); }
+
+    const Float &array() const { return m_array; }
+    Float &array() { return m_array; }
+
+private:
+    Float m_array;
+    std::vector<float> m_built;
+    bool m_at_built = false;
+};
+
 NAMESPACE_END(diffraction_detail)
 NAMESPACE_END(mitsuba)

@@ -268,9 +268,20 @@ private:
 /// The values of the parameters a program reads (`Op::Param`): `array`,
 /// STAM_PARAMS values by STAM_PARAM_* id (width 0: the program's own
 /// values); `per_point[id]`, where not empty, that parameter per lane.
+/// `at_built`: every value is the one the programs were built with, none
+/// per point or carrying a gradient (the caller's promise), so that the
+/// programs for that case (STAM_PROGRAM_AT_BUILT) may run.
 template <typename Float> struct ParamInputs {
     Float array;
     Float per_point[STAM_PARAMS];
+    bool at_built = false;
+
+    bool any_per_point() const {
+        for (const Float &v : per_point)
+            if (dr::width(v) != 0)
+                return true;
+        return false;
+    }
 };
 
 template <typename Float> class Program {

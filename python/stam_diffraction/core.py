@@ -80,7 +80,7 @@ def _header_program_kinds(path=HEADER):
 
 _KINDS = _header_program_kinds()
 _KIND_NAMES = ('EVAL_RGB', 'EVAL_SPECTRAL', 'PDF_RGB', 'PDF_SPECTRAL', 'SAMPLE_RGB',
-               'SAMPLE_SPECTRAL', 'COHERENT_RGB', 'COHERENT_SPECTRAL', 'KINDS')
+               'SAMPLE_SPECTRAL', 'COHERENT_RGB', 'COHERENT_SPECTRAL', 'KINDS', 'AT_BUILT')
 if set(_KINDS) != set(_KIND_NAMES):
     raise RuntimeError('stam_diffraction.core: %s has the program kinds %s, not %s'
                        % (HEADER, sorted(_KINDS), sorted(_KIND_NAMES)))
@@ -105,6 +105,9 @@ PROGRAM_SAMPLE_SPECTRAL = _KINDS['SAMPLE_SPECTRAL']
 PROGRAM_COHERENT_RGB = _KINDS['COHERENT_RGB']
 PROGRAM_COHERENT_SPECTRAL = _KINDS['COHERENT_SPECTRAL']
 PROGRAM_KINDS = _KINDS['KINDS']
+# Added to a kind: its program for a renderer that keeps every parameter at its
+# built value (no texture, no gradient); None where it is the plain program.
+PROGRAM_AT_BUILT = _KINDS['AT_BUILT']
 # (inputs, outputs) of each kind, indexed by its code (the table above).
 PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
               PROGRAM_PDF_RGB: (6, 1), PROGRAM_PDF_SPECTRAL: (7, 1),
@@ -268,7 +271,8 @@ class Brdf:
         return int(self._lib.stam_brdf_memory_bytes(self._handle()))
 
     def export_program(self, kind):
-        """The program of `kind` (PROGRAM_EVAL_RGB .. PROGRAM_COHERENT_SPECTRAL;
+        """The program of `kind` (PROGRAM_EVAL_RGB .. PROGRAM_COHERENT_SPECTRAL,
+        plus PROGRAM_AT_BUILT for the built parameters' program;
         stam_brdf_export_program) as a float32 array for run_program, or
         None when the material has none of that kind or the kind is not one."""
         kind = operator.index(kind)

@@ -156,6 +156,13 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 #define STAM_PROGRAM_COHERENT_RGB 6u
 #define STAM_PROGRAM_COHERENT_SPECTRAL 7u
 #define STAM_PROGRAM_KINDS 8u
+/* Added to a kind's code: that kind's program for a renderer that runs it
+ * only while every parameter it reads has the value it was built with (the
+ * parameter section's; no texture, no gradient, no update since). It may
+ * leave out what only follows a parameter's change (the Gaussian RGB table's
+ * derivative channels); the same inputs and outputs. The call returns 0
+ * where that program would be the plain one. */
+#define STAM_PROGRAM_AT_BUILT 256u
 size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
                                 size_t capacity);
 

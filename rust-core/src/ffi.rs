@@ -577,10 +577,17 @@ pub unsafe extern "C" fn stam_brdf_export_program(
         return 0;
     }
     catch_unwind(AssertUnwindSafe(|| {
-        let Some(kind) = crate::material::program::ProgramKind::from_code(kind) else {
+        use crate::material::program::ProgramKind;
+        let at_built = kind & ProgramKind::AT_BUILT != 0;
+        let Some(kind) = ProgramKind::from_code(kind & !ProgramKind::AT_BUILT) else {
             return 0;
         };
-        let Some(program) = (*b).brdf.program(kind) else {
+        let program = if at_built {
+            (*b).brdf.program_at_built(kind)
+        } else {
+            (*b).brdf.program(kind)
+        };
+        let Some(program) = program else {
             return 0;
         };
         let encoded = program.encode();

@@ -53,6 +53,11 @@ impl ProgramKind {
         Self::ALL.get(code as usize).copied()
     }
 
+    /// Added to a kind's code (STAM_PROGRAM_AT_BUILT): the program for a
+    /// renderer that passes every parameter at its built value
+    /// (`Brdf::program_at_built`).
+    pub const AT_BUILT: u32 = 256;
+
     /// Whether the kind takes a wavelength (its last input).
     pub fn spectral(self) -> bool {
         (self as u32) % 2 == 1
@@ -77,11 +82,25 @@ impl Brdf {
     /// (gratings) inside it (`FactorProgram`, at each wavelength the
     /// model's RGB integration takes).
     pub fn program(&self, kind: ProgramKind) -> Option<Program> {
+        self.program_with(kind, Builder::new())
+    }
+
+    /// The program of `kind` for a renderer that runs it only with every
+    /// parameter at the value it was built with (no texture, no gradient,
+    /// no update since): it may leave out what follows a parameter's
+    /// change (the Gaussian folded RGB table's derivative channels, 48 of
+    /// its 112 gathers). None where it would equal `program`'s.
+    pub fn program_at_built(&self, kind: ProgramKind) -> Option<Program> {
+        let lean = self.program_with(kind, Builder::at_built_values())?;
+        let plain = self.program(kind)?;
+        (lean.encode() != plain.encode()).then_some(lean)
+    }
+
+    fn program_with(&self, kind: ProgramKind, b: Builder) -> Option<Program> {
         let energy = self.energy_table();
         let per_wavelength = energy.filter(|e| !e.colour_neutral());
         let model = self.surface.programs();
         let shading = self.shading();
-        let b = Builder::new();
         let outputs: Vec<Value> = match kind {
             ProgramKind::EvalRgb | ProgramKind::EvalSpectral => {
                 let (wi, wo) = (input3(&b), input3(&b));

@@ -20,6 +20,10 @@ struct State {
 #[derive(Default)]
 pub struct Builder {
     state: RefCell<State>,
+    /// The renderer promises that every parameter the program reads has the
+    /// value it is built with (no texture, no gradient): what only follows
+    /// a change of parameter may be left out.
+    at_built: bool,
 }
 
 /// A float register.
@@ -55,6 +59,20 @@ impl Table {
 impl Builder {
     pub fn new() -> Builder {
         Builder::default()
+    }
+
+    /// A builder for a program that the renderer runs only with the
+    /// parameters' built values (`at_built`).
+    pub fn at_built_values() -> Builder {
+        Builder {
+            at_built: true,
+            ..Builder::default()
+        }
+    }
+
+    /// Whether the program will only see its parameters' built values.
+    pub fn at_built(&self) -> bool {
+        self.at_built
     }
 
     fn push(&self, op: Op, a: u32, b: u32, c: u32) -> u32 {

@@ -271,7 +271,11 @@ pub(crate) fn rgb_from_table<'a>(
     let base = iu * t.row_len as f64 + iv * t.values as f64;
     let wu = bspline_weights(fu - iu);
     let wv = bspline_weights(fv - iv);
-    let v = bicubic(b, table, base, t.row_len, t.values, t.values, wu, wv);
+    // At the built parameters the pair's cosine is the table point's: the
+    // derivative channels (the last three of a folded point) are not read.
+    let lean = t.folded && b.at_built();
+    let count = if lean { 4 } else { t.values };
+    let v = bicubic(b, table, base, t.row_len, t.values, count, wu, wv);
     // K_j = Tx Ty / (4 pi w^2) k_j^2 S_j = sigma^2 Tx Ty / (4 pi g0) k_j^2 S_j.
     let ln_scale = (sigma * sigma * tx * ty * (1.0 / (4.0 * PI))).ln();
     let rgb = if t.combined {
@@ -286,7 +290,14 @@ pub(crate) fn rgb_from_table<'a>(
                 + g0 * (1.0 / (4.0 * t.sigma_um * t.sigma_um)))
                 .sqrt();
             let dc = c - cos_table;
-            std::array::from_fn(|i| dc.fma(v[4 + i], cone.fma(t.cos_slope[i], v[1 + i])) * n)
+            std::array::from_fn(|i| {
+                let at_table = cone.fma(t.cos_slope[i], v[1 + i]);
+                if lean {
+                    at_table * n
+                } else {
+                    dc.fma(v[4 + i], at_table) * n
+                }
+            })
         } else {
             let scale = n * shading.fresnel.program(b, pair.cos_half, b.c(550.0));
             [v[1] * scale, v[2] * scale, v[3] * scale]

@@ -551,3 +551,78 @@ fn rgb_table_layouts_match_native() {
         }
     }
 }
+
+/// The RGB eval for a renderer that keeps the built parameters
+/// (`Brdf::program_at_built`): for isotropic metals, whose folded table's
+/// derivative channels it leaves out, 48 gathers fewer and the plain
+/// program's values (the channels' correction is dc ~ f32 rounding there);
+/// no such program where it would be the plain one (other Fresnel terms,
+/// other kinds), and the C ABI gives it for the kind's code plus
+/// STAM_PROGRAM_AT_BUILT.
+#[test]
+fn at_built_rgb_eval_equals_the_plain_one() {
+    use crate::ffi::{stam_brdf_export_program, stam_brdf_free, stam_brdf_new};
+    let gathers = |p: &Program| p.code.iter().filter(|i| i.op == Op::Gather).count();
+    let mut lean_for = Vec::new();
+    for (name, json) in MATERIALS {
+        for energy in ["stam", "conserving"] {
+            let json = json.replacen('{', &format!(r#"{{"energy":"{energy}","#), 1);
+            let b = Brdf::from_json(&json).unwrap();
+            for kind in ProgramKind::ALL {
+                if kind != ProgramKind::EvalRgb {
+                    assert!(b.program_at_built(kind).is_none(), "{name} {kind:?}");
+                }
+            }
+            let Some(lean) = b.program_at_built(ProgramKind::EvalRgb) else {
+                continue;
+            };
+            let plain = exported(&b, ProgramKind::EvalRgb).unwrap();
+            assert_eq!(gathers(&lean) + 48, gathers(&plain), "{name}");
+            let mut worst: f64 = 0.0;
+            for (wi, wo) in pairs(4000, 3) {
+                let (wi, wo) = (round(wi), round(wo));
+                let x = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z];
+                let (p, _) = run_both(&plain, &x);
+                let (l, _) = run_both(&lean, &x);
+                let scale = p[0].max(p[1]).max(p[2]);
+                if scale > 0.0 {
+                    for c in 0..3 {
+                        worst = worst.max((l[c] - p[c]).abs() / scale);
+                    }
+                }
+            }
+            println!("{name:>18} {energy}: at-built eval, largest change {worst:.1e}");
+            assert!(worst <= 1e-5, "{name} {energy}: {worst}");
+            lean_for.push(name);
+        }
+    }
+    for name in [
+        "smooth gold",
+        "aluminium",
+        "rough gold",
+        "very rough copper",
+    ] {
+        assert!(lean_for.contains(&name), "{name}: {lean_for:?}");
+    }
+    for name in ["constant 0.9", "brushed gold", "brushed aluminium"] {
+        assert!(!lean_for.contains(&name), "{name}: {lean_for:?}");
+    }
+    // Through the C ABI.
+    let json = std::ffi::CString::new(MATERIALS[1].1).unwrap();
+    unsafe {
+        let b = stam_brdf_new(json.as_ptr(), std::ptr::null_mut(), 0);
+        assert!(!b.is_null());
+        let lean = stam_brdf_export_program(
+            b,
+            ProgramKind::EvalRgb as u32 + 256,
+            std::ptr::null_mut(),
+            0,
+        );
+        let plain =
+            stam_brdf_export_program(b, ProgramKind::EvalRgb as u32, std::ptr::null_mut(), 0);
+        let none =
+            stam_brdf_export_program(b, ProgramKind::PdfRgb as u32 + 256, std::ptr::null_mut(), 0);
+        assert!(lean > 0 && plain > 0 && none == 0, "{lean} {plain} {none}");
+        stam_brdf_free(b);
+    }
+}
