@@ -227,6 +227,9 @@ mod tests {
         assert_eq!(h::STAM_PROGRAM_KINDS as usize, K::ALL.len());
         assert_eq!(h::STAM_PROGRAM_KINDS as usize, header.len());
         assert_eq!(K::from_code(h::STAM_PROGRAM_KINDS), None);
+        // The built parameters' flag, added to a kind's code.
+        assert_eq!(h::STAM_PROGRAM_AT_BUILT, K::AT_BUILT);
+        assert_eq!(K::from_code(h::STAM_PROGRAM_AT_BUILT), None);
     }
 
     /// The parameter ids of the header (STAM_PARAM_*) are the core's
