@@ -633,12 +633,12 @@ private:
                     continue; // read per point, or from memory
                 auto it = std::find_if(m_params.begin(), m_params.end(),
                                        [&](const Param &p) { return p.name == k; });
-                if (it == m_params.end() || it->kind != Param::Number ||
-                    std::isnan(m_param_array.built(it->id)))
+                if (it == m_params.end() || it->kind != Param::Number)
                     return false;
-                float built = m_param_array.built(it->id);
+                // A parameter the programs do not read (built value NaN)
+                // fails the comparison too
                 ScalarFloat v = scalar_of(it->diff, it->name);
-                if (!(std::abs(v / built - 1.f) <= MaxDriftWithoutRebuild))
+                if (!(std::abs(v / m_param_array.built(it->id) - 1.f) <= MaxDriftWithoutRebuild))
                     return false;
             }
             for (Param &p : m_params)

@@ -285,17 +285,19 @@ pub(crate) fn rgb_from_table<'a>(
             let cone = c * (c * c * -4.0).exp();
             // The cosine the table's point had at the parameters it was
             // built with; where the program's parameters differ, the
-            // channels follow the pair's cosine to first order.
-            let cos_table = (x0 * (1.0 / (t.corr_um * t.corr_um))
-                + g0 * (1.0 / (4.0 * t.sigma_um * t.sigma_um)))
-                .sqrt();
-            let dc = c - cos_table;
+            // channels follow the pair's cosine to first order (not at the
+            // built parameters, where the cosines are equal).
+            let dc = (!lean).then(|| {
+                let cos_table = (x0 * (1.0 / (t.corr_um * t.corr_um))
+                    + g0 * (1.0 / (4.0 * t.sigma_um * t.sigma_um)))
+                    .sqrt();
+                c - cos_table
+            });
             std::array::from_fn(|i| {
                 let at_table = cone.fma(t.cos_slope[i], v[1 + i]);
-                if lean {
-                    at_table * n
-                } else {
-                    dc.fma(v[4 + i], at_table) * n
+                match dc {
+                    Some(dc) => dc.fma(v[4 + i], at_table) * n,
+                    None => at_table * n,
                 }
             })
         } else {
