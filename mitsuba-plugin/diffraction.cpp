@@ -141,7 +141,9 @@ Diffraction BSDF (:monosp:`diffraction`)
      that no direction reflects more light than it receives (reciprocal;
      the table is built from the material on its first use, 0.1-0.4 s;
      ``docs/energy.md``); ``stam``: the paper's formula, which near grazing
-     directions can reflect several times what it receives. (Default:
+     directions can reflect several times what it receives. AD variants: a
+     parameter's first gradient rebuilds the material once with the table's
+     derivatives, which gradients then follow (``docs/inverse.md``). (Default:
      ``conserving``; ``stam`` with a ``sigma_um`` texture)
    - |exposed| (a string)
  * - series_tolerance
@@ -465,6 +467,7 @@ public:
                     if (p.kind == Param::Number)
                         p.value = scalar_of(p.diff, p.name);
                 m_twist = scalar_of(m_twist_diff, "twist");
+                m_energy_derivatives |= diffraction_detail::any_gradient(m_params);
             }
             check_frame();
             Core core = build_core();
@@ -626,7 +629,9 @@ private:
     /// material is rebuilt.
     bool update_without_rebuild(const std::vector<std::string> &keys) {
         if constexpr (dr::is_jit_v<Float>) {
-            if (keys.empty())
+            // A first gradient: rebuilt with the energy table's derivatives
+            if (keys.empty() ||
+                (!m_energy_derivatives && diffraction_detail::any_gradient(m_params)))
                 return false;
             for (const std::string &k : keys) {
                 if (k == "twist" || m_textures.owns(k))
@@ -708,7 +713,7 @@ private:
     /// the core's message (completed with the plugin's keys) when refused.
     Core build_core() const {
         Core c;
-        c.json = build_json(m_params);
+        c.json = build_json(m_params, m_energy_derivatives);
         char err[4096] = { 0 };
         c.ptr.reset(stam_brdf_new(c.json.c_str(), err, sizeof(err)));
         if (!c.ptr)
@@ -966,6 +971,7 @@ private:
     CorePtr m_core;
     uint32_t m_core_flags = 0;
     bool m_has_coherent = false;
+    bool m_energy_derivatives = false; // a parameter carried a gradient: see build_json
     std::string m_warnings, m_pending_warnings; // logged, and of the core in use
 
     // JIT variants: the core's programs, and every program's tables in one

@@ -106,8 +106,11 @@ template <typename Float> std::string number_text(const PluginParam<Float> &p) {
     return buf;
 }
 
-/// The core's JSON parameter object
-template <typename Float> std::string build_json(const std::vector<PluginParam<Float>> &params) {
+/// The core's JSON parameter object; `energy_derivatives`: ask the core for
+/// its energy table's derivatives, which its programs then follow
+template <typename Float>
+std::string build_json(const std::vector<PluginParam<Float>> &params,
+                       bool energy_derivatives = false) {
     using P = PluginParam<Float>;
     std::string top, nested;
     for (const P &p : params) {
@@ -127,7 +130,18 @@ template <typename Float> std::string build_json(const std::vector<PluginParam<F
     }
     if (!nested.empty())
         top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
+    if (energy_derivatives)
+        top += (top.empty() ? "" : ", ") + json_escape("energy_derivatives") + ": true";
     return "{" + top + "}";
+}
+
+/// Whether a number parameter carries a gradient (JIT variants): the core
+/// is then asked for its energy table's derivatives (build_json)
+template <typename Float> bool any_gradient(const std::vector<PluginParam<Float>> &params) {
+    for (const PluginParam<Float> &p : params)
+        if (p.kind == PluginParam<Float>::Number && dr::grad_enabled(p.diff))
+            return true;
+    return false;
 }
 
 /// The parameters as the object's string form lists them ("  name = value,")

@@ -39,7 +39,7 @@
 use super::Brdf;
 use crate::models::{EnergyHint, FactorProgram};
 use crate::optics::program::Vec3;
-use crate::program::{lookup, Builder, Value};
+use crate::program::{lookup, Builder, ParamId, Table, Value};
 use crate::sampling::warps::radical_inverse;
 use crate::sampling::SplitMix64;
 use glam::DVec3;
@@ -450,6 +450,47 @@ impl EnergyTable {
     }
 }
 
+/// How the table changes with one parameter of the surface: d m / d ln p
+/// at every entry (the layout of `EnergyTable::m`), from tables built at p
+/// e^(+-DERIVATIVE_STEP) with the same random numbers, so that their
+/// transfers' noise mostly cancels in the difference. The programs read m
+/// as m + ln(p / p0) dm for such a parameter p (built at p0), so that a
+/// renderer's AD sees how the scaling follows p (docs/inverse.md).
+pub struct TableDerivative {
+    pub id: ParamId,
+    /// The value p0 the table was built at.
+    pub built: f64,
+    pub per_log: Vec<f64>,
+}
+
+/// The step in ln p of a derivative's central difference: about the
+/// largest change a renderer makes without rebuilding the material (2%),
+/// so that the difference spans what the programs are used for.
+pub const DERIVATIVE_STEP: f64 = 0.02;
+
+impl TableDerivative {
+    /// The derivative of `centre` along `id` from the tables at p0
+    /// e^(+-DERIVATIVE_STEP) (either may be missing where that value is not
+    /// a valid material: a one-sided difference then; neither: None).
+    pub fn new(
+        id: ParamId,
+        built: f64,
+        centre: &EnergyTable,
+        below: Option<&EnergyTable>,
+        above: Option<&EnergyTable>,
+    ) -> Option<TableDerivative> {
+        let same = |t: &&EnergyTable| t.m.len() == centre.m.len();
+        let (lo, hi, step) = match (below.filter(same), above.filter(same)) {
+            (Some(lo), Some(hi)) => (&lo.m, &hi.m, 2.0 * DERIVATIVE_STEP),
+            (Some(lo), None) => (&lo.m, &centre.m, DERIVATIVE_STEP),
+            (None, Some(hi)) => (&centre.m, &hi.m, DERIVATIVE_STEP),
+            (None, None) => return None,
+        };
+        let per_log = lo.iter().zip(hi).map(|(a, b)| (b - a) / step).collect();
+        Some(TableDerivative { id, built, per_log })
+    }
+}
+
 /// The table as program operations (crate::program, docs/jit.md).
 impl EnergyTable {
     /// Whether one factor serves every wavelength.
@@ -457,25 +498,82 @@ impl EnergyTable {
         self.nodes == 1
     }
 
+    /// The table in a program, reading it as m + sum ln(p / p0) dm over
+    /// `derivatives` (the parameters p the rest of the program reads; none
+    /// for a program run at the built parameters).
+    pub fn program<'a>(
+        &'a self,
+        b: &'a Builder,
+        derivatives: &[&TableDerivative],
+    ) -> TableProgram<'a> {
+        let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect();
+        TableProgram {
+            table: self,
+            b,
+            m: b.table(f32s(&self.m)),
+            terms: derivatives
+                .iter()
+                .map(|d| {
+                    let p = b.param(d.id, d.built);
+                    ((p * (1.0 / d.built)).ln(), b.table(f32s(&d.per_log)))
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `EnergyTable::program`: the table's lookups as program operations.
+pub struct TableProgram<'a> {
+    table: &'a EnergyTable,
+    b: &'a Builder,
+    m: Table,
+    /// Per derivative: ln(p / p0) and the table of d m / d ln p.
+    terms: Vec<(Value<'a>, Table)>,
+}
+
+impl<'a> TableProgram<'a> {
+    /// Whether one factor serves every wavelength.
+    pub fn colour_neutral(&self) -> bool {
+        self.table.colour_neutral()
+    }
+
+    /// The entry at `index`: m there, moved along the derivatives.
+    fn entry(&self, index: Value<'a>) -> Value<'a> {
+        let b = self.b;
+        self.terms
+            .iter()
+            .fold(b.gather(self.m, index), |m, &(dlog, d)| {
+                b.gather(d, index).fma(dlog, m)
+            })
+    }
+
+    /// m at the four cells around a direction, at node `q`.
+    fn at_corners(&self, corners: &[(Value<'a>, Value<'a>); 4], q: Value<'a>) -> Value<'a> {
+        lookup::sum(
+            self.b,
+            corners.iter().map(|&(row, w)| w * self.entry(row + q)),
+        )
+    }
+
     /// `pair(wi, wo).at(lambda)` for unit directions above the horizon;
     /// `lambda_nm` None only for colour-neutral tables (else None). One
-    /// wavelength: 16 gathers (8 for a colour-neutral table).
-    pub fn pair_program<'a>(
+    /// wavelength: 16 gathers (8 for a colour-neutral table), times one
+    /// plus the number of derivatives.
+    pub fn pair(
         &self,
-        b: &'a Builder,
         wi: Vec3<'a>,
         wo: Vec3<'a>,
         lambda_nm: Option<Value<'a>>,
     ) -> Option<Value<'a>> {
-        if lambda_nm.is_none() && self.nodes > 1 {
+        let (t, b) = (self.table, self.b);
+        if lambda_nm.is_none() && t.nodes > 1 {
             return None;
         }
-        let table = b.table(self.m.iter().map(|&v| v as f32).collect());
-        let k = self.nodes;
+        let k = t.nodes;
         // The node pair and weight (as EnergyTable::pair_at).
         let (q0, fq) = match lambda_nm {
             Some(lambda) if k > 1 => {
-                let x = ((lambda - self.lambda_lo) * self.nodes_per_nm).clamp(0.0, (k - 1) as f64);
+                let x = ((lambda - t.lambda_lo) * t.nodes_per_nm).clamp(0.0, (k - 1) as f64);
                 let q = x.floor().min((k - 2) as f64);
                 (q, Some(x - q))
             }
@@ -483,20 +581,18 @@ impl EnergyTable {
         };
         // m at a direction, at nodes q0 and q0 + 1.
         let factor = |d: Vec3<'a>| -> (Value<'a>, Value<'a>) {
-            let corners = self.corners_program(b, d);
-            let at = |q: Value<'a>| {
-                lookup::sum(
-                    b,
-                    corners.iter().map(|&(row, w)| w * b.gather(table, row + q)),
-                )
+            let corners = t.corners_program(b, d);
+            let lo = self.at_corners(&corners, q0);
+            let hi = if fq.is_some() {
+                self.at_corners(&corners, q0 + 1.0)
+            } else {
+                lo
             };
-            let lo = at(q0);
-            let hi = if fq.is_some() { at(q0 + 1.0) } else { lo };
             (lo, hi)
         };
         let (a0, a1) = factor(wi);
         let (b0, b1) = factor(wo);
-        let taper = self.taper_program(wi[2]) * self.taper_program(wo[2]);
+        let taper = t.taper_program(wi[2]) * t.taper_program(wo[2]);
         let p0 = a0 * b0 * taper;
         Some(match fq {
             Some(f) => {
@@ -510,26 +606,17 @@ impl EnergyTable {
     /// The pair's factor at every wavelength node, for programs that need
     /// it at many wavelengths (a grating's RGB: three per order, and the
     /// broad rule's nodes): the table's rows around wi and wo gathered once
-    /// (8 gathers per node), then linear in lambda by selects.
-    pub fn pair_factor_program<'a>(
-        &self,
-        b: &'a Builder,
-        wi: Vec3<'a>,
-        wo: Vec3<'a>,
-    ) -> PairFactorProgram<'a> {
-        let table = b.table(self.m.iter().map(|&v| v as f32).collect());
-        let (ci, co) = (self.corners_program(b, wi), self.corners_program(b, wo));
-        let m = |corners: &[(Value<'a>, Value<'a>); 4], q: usize| {
-            lookup::sum(
-                b,
-                corners
-                    .iter()
-                    .map(|&(row, w)| w * b.gather(table, row + q as f64)),
-            )
-        };
-        let taper = self.taper_program(wi[2]) * self.taper_program(wo[2]);
-        let product: Vec<Value<'a>> = (0..self.nodes)
-            .map(|q| m(&ci, q) * m(&co, q) * taper)
+    /// (8 gathers per node, times one plus the number of derivatives),
+    /// then linear in lambda by selects.
+    pub fn pair_factor(&self, wi: Vec3<'a>, wo: Vec3<'a>) -> PairFactorProgram<'a> {
+        let (t, b) = (self.table, self.b);
+        let (ci, co) = (t.corners_program(b, wi), t.corners_program(b, wo));
+        let taper = t.taper_program(wi[2]) * t.taper_program(wo[2]);
+        let product: Vec<Value<'a>> = (0..t.nodes)
+            .map(|q| {
+                let q = b.c(q as f64);
+                self.at_corners(&ci, q) * self.at_corners(&co, q) * taper
+            })
             .collect();
         // Per segment q: the slope d_q and the intercept product_q - q d_q.
         let slope: Vec<Value<'a>> = product.windows(2).map(|p| p[1] - p[0]).collect();
@@ -540,14 +627,17 @@ impl EnergyTable {
             .map(|(q, (&p, &d))| d.fma(-(q as f64), p))
             .collect();
         PairFactorProgram {
-            lambda_lo: self.lambda_lo,
-            lambda_step: self.lambda_step,
+            lambda_lo: t.lambda_lo,
+            lambda_step: t.lambda_step,
             product,
             slope,
             intercept,
         }
     }
+}
 
+/// The table's geometry as program operations.
+impl EnergyTable {
     /// The four cells around a unit direction above the horizon (as
     /// `corners`): each as the table index of its node 0, and its bilinear
     /// weight.
@@ -586,7 +676,7 @@ impl EnergyTable {
     }
 }
 
-/// `EnergyTable::pair_factor_program`: m(wi, lambda) m(wo, lambda) of one
+/// `TableProgram::pair_factor`: m(wi, lambda) m(wo, lambda) of one
 /// pair at the table's nodes, linear in between (as `PairEnergy::at`).
 pub struct PairFactorProgram<'a> {
     lambda_lo: f64,

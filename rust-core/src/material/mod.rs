@@ -35,7 +35,7 @@ use crate::optics::fresnel::{Fresnel, FresnelAtCos};
 use crate::optics::geometry::{normalize_direction, reflect, PairGeometry, MIN_COS};
 use crate::special::finite_non_negative;
 use crate::spectrum::{self, gamut_map, in_band};
-use energy::{EnergyMode, EnergyTable, PairEnergy};
+use energy::{EnergyMode, EnergyTable, PairEnergy, TableDerivative};
 use glam::DVec3;
 use params::MaterialParams;
 use std::collections::HashMap;
@@ -52,10 +52,12 @@ pub struct Brdf {
     energy: Option<Energy>,
 }
 
-/// What the energy table is built from, and the table once built.
+/// What the energy table is built from, and the table once built; with
+/// `"energy_derivatives"`, its derivatives too.
 struct Energy {
     surface: SurfaceParams,
     table: OnceLock<Arc<EnergyTable>>,
+    derivatives: Option<OnceLock<Vec<TableDerivative>>>,
 }
 
 /// Energy tables built in this process, by their surface parameters (the
@@ -90,6 +92,28 @@ fn cached_energy_table(
     map.entry(key).or_insert(table).clone()
 }
 
+/// The energy table of the surface `surface` (cached), from its white twin
+/// (F = 1, Stam's formula); None where the parameters are not a valid
+/// material (a derivative's neighbour beyond a parameter's range).
+fn energy_table_of(surface: &SurfaceParams) -> Option<Arc<EnergyTable>> {
+    let white = Brdf::new(MaterialParams {
+        surface: surface.clone(),
+        fresnel: Fresnel::Constant(1.0),
+        energy: EnergyMode::Stam,
+        energy_derivatives: false,
+    })
+    .ok()?;
+    Some(cached_energy_table(surface, || {
+        let azimuthal = white.flags() & FLAG_ANISOTROPIC != 0;
+        EnergyTable::build(
+            &white,
+            azimuthal,
+            (spectrum::LAMBDA_MIN_NM, spectrum::LAMBDA_MAX_NM),
+            white.surface.energy_hint(),
+        )
+    }))
+}
+
 impl Brdf {
     pub fn from_json(text: &str) -> Result<Brdf, StamError> {
         Brdf::new(MaterialParams::from_json(text)?)
@@ -101,6 +125,7 @@ impl Brdf {
         let energy = (params.energy == EnergyMode::Conserving).then(|| Energy {
             surface: params.surface.clone(),
             table: OnceLock::new(),
+            derivatives: params.energy_derivatives.then(OnceLock::new),
         });
         Ok(Brdf {
             surface,
@@ -114,23 +139,37 @@ impl Brdf {
     /// its white twin (F = 1, Stam's formula).
     pub fn energy_table(&self) -> Option<&EnergyTable> {
         let energy = self.energy.as_ref()?;
-        Some(energy.table.get_or_init(|| {
-            cached_energy_table(&energy.surface, || {
-                let white = Brdf::new(MaterialParams {
-                    surface: energy.surface.clone(),
-                    fresnel: Fresnel::Constant(1.0),
-                    energy: EnergyMode::Stam,
+        Some(
+            energy
+                .table
+                .get_or_init(|| energy_table_of(&energy.surface).expect("a valid material")),
+        )
+    }
+
+    /// The energy table's derivatives along the surface's program
+    /// parameters (`"energy_derivatives": true`; else empty), built on
+    /// first use.
+    pub fn energy_derivatives(&self) -> &[TableDerivative] {
+        let Some(energy) = self.energy.as_ref() else {
+            return &[];
+        };
+        let Some(derivatives) = energy.derivatives.as_ref() else {
+            return &[];
+        };
+        derivatives.get_or_init(|| {
+            let centre = self.energy_table().expect("a conserving material");
+            let at = |id, value| energy_table_of(&energy.surface.with_param(id, value));
+            energy
+                .surface
+                .table_params()
+                .into_iter()
+                .filter_map(|(id, p0)| {
+                    let step = energy::DERIVATIVE_STEP.exp();
+                    let (below, above) = (at(id, p0 / step), at(id, p0 * step));
+                    TableDerivative::new(id, p0, centre, below.as_deref(), above.as_deref())
                 })
-                .expect("the white twin of a valid material is valid");
-                let azimuthal = self.flags() & FLAG_ANISOTROPIC != 0;
-                EnergyTable::build(
-                    &white,
-                    azimuthal,
-                    (spectrum::LAMBDA_MIN_NM, spectrum::LAMBDA_MAX_NM),
-                    self.surface.energy_hint(),
-                )
-            })
-        }))
+                .collect()
+        })
     }
 
     /// The energy scaling m(wi, lambda) m(wo, lambda) of a pair (None for

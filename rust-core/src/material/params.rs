@@ -23,7 +23,7 @@ pub mod range {
 }
 
 /// The keys the material reads whatever its surface.
-const MATERIAL_KEYS: [&str; 3] = ["surface", "fresnel", "energy"];
+const MATERIAL_KEYS: [&str; 4] = ["surface", "fresnel", "energy", "energy_derivatives"];
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialParams {
@@ -33,6 +33,11 @@ pub struct MaterialParams {
     /// docs/energy.md) or "stam" (the paper's formula). A sigma texture's
     /// default is "stam".
     pub energy: EnergyMode,
+    /// With "conserving": also build the energy table's derivatives along
+    /// the surface's program parameters, which the programs then follow
+    /// (`"energy_derivatives": true`; a renderer sets it once a parameter
+    /// carries a gradient: they cost two table builds per parameter).
+    pub energy_derivatives: bool,
 }
 
 fn err(msg: String) -> StamError {
@@ -72,10 +77,21 @@ impl MaterialParams {
                 "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma); leave 'energy' out or set it to \"stam\"".to_string(),
             ));
         }
+        let energy_derivatives = match obj.get("energy_derivatives") {
+            None => false,
+            Some(Value::Bool(b)) => *b,
+            Some(other) => {
+                return Err(err(format!(
+                    "parameter 'energy_derivatives' must be true or false, got {}",
+                    type_name(other)
+                )))
+            }
+        };
         Ok(MaterialParams {
             surface,
             fresnel,
             energy,
+            energy_derivatives,
         })
     }
 }
@@ -240,7 +256,15 @@ mod tests {
             m.contains("unknown parameter 'series_tolerance' for surface 'cd'"),
             "{m}"
         );
-        assert!(m.contains("surface, fresnel, energy, period_um"), "{m}");
+        assert!(
+            m.contains("surface, fresnel, energy, energy_derivatives, period_um"),
+            "{m}"
+        );
+        let m = message(r#"{"surface":"cd","energy_derivatives":1}"#);
+        assert!(
+            m.contains("'energy_derivatives' must be true or false"),
+            "{m}"
+        );
         let m = message(r#"{"surface":"cd","rgb_nodes":16}"#);
         assert!(m.contains("unknown parameter 'rgb_nodes'"), "{m}");
         let m = message(

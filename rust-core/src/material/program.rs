@@ -6,6 +6,7 @@
 //! rest. Every kind has fixed inputs and outputs, listed in stam.h
 //! (STAM_PROGRAM_*), the plugin's executor reads them in that order.
 
+use super::energy::TableDerivative;
 use super::Brdf;
 use crate::models::FactorProgram;
 use crate::optics::program::{upper_direction, PairProgram, Vec3};
@@ -82,22 +83,32 @@ impl Brdf {
     /// (gratings) inside it (`FactorProgram`, at each wavelength the
     /// model's RGB integration takes).
     pub fn program(&self, kind: ProgramKind) -> Option<Program> {
-        self.program_with(kind, Builder::new())
+        self.program_with(kind, Builder::new(), true)
     }
 
     /// The program of `kind` for a renderer that runs it only with every
     /// parameter at the value it was built with (no texture, no gradient,
     /// no update since): it may leave out what follows a parameter's
     /// change (the Gaussian folded RGB table's derivative channels, 48 of
-    /// its 112 gathers). None where it would equal `program`'s.
+    /// its 112 gathers; the energy table's derivatives). None where it
+    /// would equal `program`'s.
     pub fn program_at_built(&self, kind: ProgramKind) -> Option<Program> {
-        let lean = self.program_with(kind, Builder::at_built_values())?;
+        let lean = self.program_with(kind, Builder::at_built_values(), true)?;
         let plain = self.program(kind)?;
         (lean.encode() != plain.encode()).then_some(lean)
     }
 
-    fn program_with(&self, kind: ProgramKind, b: Builder) -> Option<Program> {
-        let energy = self.energy_table();
+    /// The program of `kind` from `b`; without `with_energy`, Stam's f even
+    /// for a conserving material (what tells which parameters the model's
+    /// own part reads).
+    fn program_with(&self, kind: ProgramKind, b: Builder, with_energy: bool) -> Option<Program> {
+        let energy = self.energy_table().filter(|_| with_energy);
+        let derivatives = match energy {
+            Some(_) if !b.at_built() => self.derivatives_read_by(kind),
+            _ => Vec::new(),
+        };
+        let energy = energy.map(|e| e.program(&b, &derivatives));
+        let energy = energy.as_ref();
         let per_wavelength = energy.filter(|e| !e.colour_neutral());
         let model = self.surface.programs();
         let shading = self.shading();
@@ -106,8 +117,7 @@ impl Brdf {
                 let (wi, wo) = (input3(&b), input3(&b));
                 let pair = PairProgram::new(&b, wi, wo);
                 if kind == ProgramKind::EvalRgb {
-                    let factor =
-                        per_wavelength.map(|e| e.pair_factor_program(&b, pair.wi, pair.wo));
+                    let factor = per_wavelength.map(|e| e.pair_factor(pair.wi, pair.wo));
                     let rgb = model.reflectance_rgb_program(
                         &b,
                         &shading,
@@ -116,9 +126,7 @@ impl Brdf {
                     )?;
                     // A colour-neutral factor commutes with the gamut map.
                     let scale = match energy.filter(|e| e.colour_neutral()) {
-                        Some(e) => {
-                            pair.geometric_factor * e.pair_program(&b, pair.wi, pair.wo, None)?
-                        }
+                        Some(e) => pair.geometric_factor * e.pair(pair.wi, pair.wo, None)?,
                         None => pair.geometric_factor,
                     };
                     let rgb = gamut_map_program(rgb.map(|c| c * scale));
@@ -131,7 +139,7 @@ impl Brdf {
                     let f2 = self.fresnel.program(&b, pair.cos_half, lambda);
                     let mut f = f2 * pair.geometric_factor * kernel;
                     if let Some(e) = energy {
-                        f = f * e.pair_program(&b, pair.wi, pair.wo, Some(lambda))?;
+                        f = f * e.pair(pair.wi, pair.wo, Some(lambda))?;
                     }
                     let f = f.finite_non_negative();
                     vec![(pair.valid & in_band).select(f, 0.0)]
@@ -177,7 +185,7 @@ impl Brdf {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
                 let mirror = [-wi[0], -wi[1], wi[2]];
                 let (rgb, lambda, ok) = if kind == ProgramKind::CoherentRgb {
-                    let factor = per_wavelength.map(|e| e.pair_factor_program(&b, wi, mirror));
+                    let factor = per_wavelength.map(|e| e.pair_factor(wi, mirror));
                     let mut rgb = model.coherent_rgb_program(
                         &b,
                         &shading,
@@ -185,7 +193,7 @@ impl Brdf {
                         factor.as_ref().map(|f| f as &dyn FactorProgram),
                     )?;
                     if let Some(e) = energy.filter(|e| e.colour_neutral()) {
-                        let m = e.pair_program(&b, wi, mirror, None)?;
+                        let m = e.pair(wi, mirror, None)?;
                         rgb = rgb.map(|c| c * m);
                     }
                     (gamut_map_program(rgb).to_vec(), None, ok_i)
@@ -193,7 +201,7 @@ impl Brdf {
                     let (lambda, in_band) = band(b.input());
                     let mut r = model.coherent_spectral_program(&b, &shading, wi[2], lambda)?;
                     if let Some(e) = energy {
-                        r = r * e.pair_program(&b, wi, mirror, Some(lambda))?;
+                        r = r * e.pair(wi, mirror, Some(lambda))?;
                     }
                     (vec![r], Some(lambda), ok_i & in_band)
                 };
@@ -207,5 +215,22 @@ impl Brdf {
             }
         };
         Some(b.finish(&outputs))
+    }
+
+    /// The energy table's derivatives along the parameters that the
+    /// model's own part of the program of `kind` reads (a grating's RGB
+    /// programs hold the period as a constant: a derivative along it would
+    /// be half a gradient).
+    fn derivatives_read_by(&self, kind: ProgramKind) -> Vec<&TableDerivative> {
+        let all = self.energy_derivatives();
+        if all.is_empty() {
+            return Vec::new();
+        }
+        let Some(stam) = self.program_with(kind, Builder::new(), false) else {
+            return Vec::new();
+        };
+        all.iter()
+            .filter(|d| stam.param_slot(d.id).is_some())
+            .collect()
     }
 }

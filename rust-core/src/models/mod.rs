@@ -22,6 +22,7 @@ use crate::error::StamError;
 use crate::json::{type_name, Reader};
 use crate::optics::fresnel::{Fresnel, FresnelAtCos};
 use crate::optics::geometry::{normalize_direction, PairGeometry, MIN_COS};
+use crate::program::ParamId;
 use crate::sampling::{rgb_sampling_nodes, Component, Components, Lobe, Mixture, SampleResult};
 use crate::special::finite_non_negative;
 use crate::spectrum::{in_band, wavenumber_per_um};
@@ -123,6 +124,17 @@ pub trait ModelParams: Sized {
     fn rgb_nodes(&self) -> usize {
         0
     }
+
+    /// The continuous parameters that the model's programs read
+    /// (`Op::Param`) and that its energy table depends on, with their
+    /// values: the table's derivatives are taken along these
+    /// (`material::energy::TableDerivative`). None for a parameter whose
+    /// value comes from a texture (it varies by far more than a
+    /// derivative's reach).
+    fn table_params(&self) -> Vec<(ParamId, f64)>;
+
+    /// A copy with the parameter `id` (one of `table_params`) at `value`.
+    fn with_param(&self, id: ParamId, value: f64) -> Self;
 }
 
 /// What each surface model provides to the material.
@@ -446,5 +458,19 @@ impl SurfaceParams {
     /// model integrates its spectrum itself).
     pub fn rgb_nodes(&self) -> usize {
         dispatch!(self, SurfaceParams, p => p.rgb_nodes())
+    }
+
+    /// `ModelParams::table_params`.
+    pub fn table_params(&self) -> Vec<(ParamId, f64)> {
+        dispatch!(self, SurfaceParams, p => p.table_params())
+    }
+
+    /// `ModelParams::with_param`.
+    pub fn with_param(&self, id: ParamId, value: f64) -> SurfaceParams {
+        match self {
+            SurfaceParams::Gaussian(p) => SurfaceParams::Gaussian(p.with_param(id, value)),
+            SurfaceParams::Fractal(p) => SurfaceParams::Fractal(p.with_param(id, value)),
+            SurfaceParams::Periodic(p) => SurfaceParams::Periodic(p.with_param(id, value)),
+        }
     }
 }

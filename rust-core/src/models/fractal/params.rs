@@ -2,6 +2,7 @@
 
 use crate::error::StamError;
 use crate::json::Reader;
+use crate::program::ParamId;
 
 /// Accepted ranges, shared by the validator, the docs and the stress tests.
 pub mod range {
@@ -33,6 +34,24 @@ impl crate::models::ModelParams for FractalParams {
 
     fn rgb_nodes(&self) -> usize {
         self.rgb_nodes
+    }
+
+    /// sigma and the lag (hurst is not a program parameter).
+    fn table_params(&self) -> Vec<(ParamId, f64)> {
+        vec![
+            (ParamId::SigmaUm, self.sigma_um),
+            (ParamId::LagUm, self.lag_um),
+        ]
+    }
+
+    fn with_param(&self, id: ParamId, value: f64) -> FractalParams {
+        let mut p = self.clone();
+        match id {
+            ParamId::SigmaUm => p.sigma_um = value,
+            ParamId::LagUm => p.lag_um = value,
+            _ => {}
+        }
+        p
     }
 
     fn parse(_surface: &str, r: &Reader) -> Result<FractalParams, StamError> {

@@ -4,6 +4,7 @@ use super::series::DEFAULT_SERIES_TOLERANCE;
 use crate::error::StamError;
 use crate::json::{format_bound, Reader};
 use crate::models::MAX_RGB_NODES;
+use crate::program::ParamId;
 
 /// Accepted ranges, shared by the validator, the docs and the stress tests.
 pub mod range {
@@ -38,6 +39,34 @@ impl crate::models::ModelParams for GaussianParams {
 
     fn rgb_nodes(&self) -> usize {
         self.rgb_nodes
+    }
+
+    /// sigma (not from a texture) and the correlation lengths, as
+    /// `GaussianSurface::params_program` reads them.
+    fn table_params(&self) -> Vec<(ParamId, f64)> {
+        let mut out = Vec::new();
+        if self.sigma_um_max.is_none() {
+            out.push((ParamId::SigmaUm, self.sigma_um));
+        }
+        if self.anisotropic {
+            out.push((ParamId::CorrXUm, self.corr_x_um));
+            out.push((ParamId::CorrYUm, self.corr_y_um));
+        } else {
+            out.push((ParamId::CorrUm, self.corr_x_um));
+        }
+        out
+    }
+
+    fn with_param(&self, id: ParamId, value: f64) -> GaussianParams {
+        let mut p = self.clone();
+        match id {
+            ParamId::SigmaUm => p.sigma_um = value,
+            ParamId::CorrUm => (p.corr_x_um, p.corr_y_um) = (value, value),
+            ParamId::CorrXUm => p.corr_x_um = value,
+            ParamId::CorrYUm => p.corr_y_um = value,
+            _ => {}
+        }
+        p
     }
 
     fn parse(_surface: &str, r: &Reader) -> Result<GaussianParams, StamError> {

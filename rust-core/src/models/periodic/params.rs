@@ -4,6 +4,7 @@
 use super::Profile;
 use crate::error::StamError;
 use crate::json::{format_bound, type_name, Reader};
+use crate::program::ParamId;
 use serde_json::Value;
 
 /// The compact disc of the paper (Stam's "Used physical dimensions").
@@ -45,6 +46,44 @@ impl crate::models::ModelParams for PeriodicParams {
 
     fn parse(surface: &str, r: &Reader) -> Result<PeriodicParams, StamError> {
         parse_periodic(r, surface == "cd")
+    }
+
+    /// The period, the coherence length and the profile's height (not from
+    /// a texture) and width; a tabulated profile's heights are not
+    /// program parameters.
+    fn table_params(&self) -> Vec<(ParamId, f64)> {
+        let mut out = vec![
+            (ParamId::PeriodUm, self.period_um),
+            (ParamId::CoherenceUm, self.coherence_um),
+        ];
+        let textured = self.height_um_max.is_some();
+        match &self.profile {
+            Profile::Rect {
+                height_um,
+                width_um,
+            } => {
+                if !textured {
+                    out.push((ParamId::HeightUm, *height_um));
+                }
+                out.push((ParamId::WidthUm, *width_um));
+            }
+            Profile::Sine { height_um } if !textured => out.push((ParamId::HeightUm, *height_um)),
+            _ => {}
+        }
+        out
+    }
+
+    fn with_param(&self, id: ParamId, value: f64) -> PeriodicParams {
+        let mut p = self.clone();
+        match (id, &mut p.profile) {
+            (ParamId::PeriodUm, _) => p.period_um = value,
+            (ParamId::CoherenceUm, _) => p.coherence_um = value,
+            (ParamId::HeightUm, Profile::Rect { height_um, .. })
+            | (ParamId::HeightUm, Profile::Sine { height_um }) => *height_um = value,
+            (ParamId::WidthUm, Profile::Rect { width_um, .. }) => *width_um = value,
+            _ => {}
+        }
+        p
     }
 }
 
