@@ -97,9 +97,13 @@ def kinds_for(variant):
 
 def programs(params, variant):
     """{kind: exported array} of the kinds the variant runs (every material
-    has them: test_every_material_runs_in_symbolic_mode)."""
+    has them: test_every_material_runs_in_symbolic_mode), as the plugin runs
+    them while the parameters are the built ones: the kind's program for the
+    built parameters where the core has one (STAM_PROGRAM_AT_BUILT: a
+    Gaussian metal's RGB eval, a grating's RGB eval), else the plain one."""
     with stam_core.Brdf(params) as b:
-        got = {k: export_program(b, k) for k in kinds_for(variant)}
+        got = {k: export_program(b, k, at_built=True) for k in kinds_for(variant)}
+        got = {k: v if v is not None else export_program(b, k) for k, v in got.items()}
     missing = [k for k, v in got.items() if v is None]
     assert not missing, (missing, params)
     return got
@@ -230,16 +234,17 @@ PROGRAM_KINDS = {
 }
 
 
-def export_program(brdf, kind):
+def export_program(brdf, kind, at_built=False):
     """The float32 array of stam_brdf_export_program for a
-    stam_diffraction.core.Brdf, or None where the material has none."""
+    stam_diffraction.core.Brdf, or None where the material has none
+    (`at_built`: the kind's program for the built parameters)."""
     import ctypes
     lib = stam_core.lib()
     fn = lib.stam_brdf_export_program
     fn.restype = ctypes.c_size_t
     fn.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_float),
                    ctypes.c_size_t]
-    code = PROGRAM_KINDS[kind][0]
+    code = PROGRAM_KINDS[kind][0] | (stam_core.PROGRAM_AT_BUILT if at_built else 0)
     n = int(fn(brdf._handle(), code, None, 0))
     if n == 0:
         return None

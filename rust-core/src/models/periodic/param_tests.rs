@@ -3,8 +3,10 @@
 //! (rect), checked with the shared harness (testing::params) at lanes on
 //! the flanks of the order peaks: a change of 0.5% and 2% against the
 //! changed material, the f64 derivative against native differences, and a
-//! smoothness sweep. The RGB programs integrate each order against tables
-//! built for the period and coherence, and keep them as constants.
+//! smoothness sweep. The RGB program reads the period (its orders planned
+//! for periods up to 6% longer, its smoothed weight C1 in mu), the height
+//! and width, and keeps the coherence length a constant (its smoothed
+//! weight's levels in t are linear).
 
 use crate::material::program::ProgramKind;
 use crate::program::ParamId::{self, *};
@@ -71,8 +73,8 @@ const CASES: [(Case, &[ParamId]); 3] = [
     ),
 ];
 
-/// The RGB program: the rect profile's height and width (the period, the
-/// coherence length and a sine profile's height stay constants there);
+/// The RGB program: the period, the profile's height and a rect's width
+/// (the coherence length stays a constant there);
 /// against the native RGB path within the rule's error, as
 /// optics/param_tests.rs holds gratings.
 const PERIODIC_RGB: Tolerances = Tolerances {
@@ -88,7 +90,7 @@ fn periodic_rgb_profile_parameters_follow_the_changed_material() {
         let profile: Vec<ParamId> = ids
             .iter()
             .copied()
-            .filter(|id| matches!(id, HeightUm | WidthUm))
+            .filter(|id| matches!(id, PeriodUm | HeightUm | WidthUm))
             .collect();
         failures.extend(check(
             &case,

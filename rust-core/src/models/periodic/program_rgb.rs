@@ -15,8 +15,10 @@
 //! levels of t, each a uniform grid in mu, as ln E and the ratios W~_c / E
 //! with E = X + Y + Z smoothed alike (positive: the exponential tails of
 //! the band are linear in ln E, so that the interpolation keeps them, and
-//! the ratios vary slowly); linear in mu within a level and in t between
-//! two levels. Where the native path takes the 3-point Gauss-Hermite rule
+//! the ratios vary slowly), with their exact slopes in mu; within a level
+//! linear in mu, or, in a program that reads the period (which moves mu),
+//! a cubic Hermite in the values and slopes (C1); linear in t between two
+//! levels. Where the native path takes the 3-point Gauss-Hermite rule
 //! on the weight (peaks narrower than a quarter nanometre) the table is the
 //! exact value the rule approximates.
 //!
@@ -35,7 +37,7 @@ use super::{RGB_SMOOTH_NODES, RGB_TAIL_EXPONENT};
 use crate::models::{FactorProgram, Shading};
 use crate::optics::fresnel::Fresnel;
 use crate::optics::program::PairProgram;
-use crate::program::{Builder, Mask, Table, Value};
+use crate::program::{Builder, Mask, ParamId, Table, Value};
 use crate::spectrum;
 use std::f64::consts::{PI, SQRT_2};
 use std::sync::OnceLock;
@@ -63,8 +65,10 @@ const LEVEL_H_MAX: f64 = 0.002;
 /// band's e^-40 has its centre within sqrt(80) s of it).
 const LEVEL_MARGIN_SIGMAS: f64 = 9.0;
 const MAX_LEVELS: usize = 128;
-/// Values per grid point: ln E and the three ratios.
+/// Values per grid point: ln E and the three ratios, then their slopes in
+/// mu (POINT of each).
 const POINT: usize = 4;
+const STRIDE: usize = 2 * POINT;
 
 /// Columns of the metals' reflectance table over wavenumber, rows over
 /// sqrt(cos) (as the native grid).
@@ -76,8 +80,9 @@ struct Level {
     t: f64,
     mu0: f64,
     h: f64,
-    /// [ln E, W~_R / E, W~_G / E, W~_B / E] at mu0 + i h.
-    points: Vec<[f32; POINT]>,
+    /// [ln E, W~_R / E, W~_G / E, W~_B / E] at mu0 + i h, then their
+    /// derivatives in mu.
+    points: Vec<[f32; STRIDE]>,
 }
 
 /// t of level k.
@@ -152,13 +157,14 @@ fn inverse3(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
 
 /// (W * N_s)(mu) for the channels and E: the exact integral of the
 /// piecewise-linear (in nu) weight against the normalised Gaussian, cell by
-/// cell (erf), within 9 s of mu.
-pub(super) fn smoothed_weight(mu: f64, s: f64) -> [f64; 4] {
+/// cell (erf), within 9 s of mu; and its derivative in mu, (W' * N_s)(mu):
+/// the cells' slopes against the same Gaussian.
+fn smoothed_weight_with_slope(mu: f64, s: f64) -> ([f64; 4], [f64; 4]) {
     let (nu, w) = weight_nodes();
-    let mut out = [0.0; 4];
+    let (mut out, mut slope_out) = ([0.0; 4], [0.0; 4]);
     let (lo, hi) = (mu - LEVEL_MARGIN_SIGMAS * s, mu + LEVEL_MARGIN_SIGMAS * s);
     if hi <= nu[0] || lo >= nu[nu.len() - 1] {
-        return out;
+        return (out, slope_out);
     }
     let k_lo = nu.partition_point(|&x| x <= lo).saturating_sub(1);
     let k_hi = nu
@@ -187,10 +193,11 @@ pub(super) fn smoothed_weight(mu: f64, s: f64) -> [f64; 4] {
         for c in 0..4 {
             let slope = (w[k + 1][c] - w[k][c]) / (b - a);
             out[c] += (w[k][c] - slope * a) * i0 + slope * i1;
+            slope_out[c] += slope * i0;
         }
         (a, ga, ea, za) = (b, gb, eb, zb);
     }
-    out
+    (out, slope_out)
 }
 
 fn level(k: usize) -> &'static Level {
@@ -203,16 +210,24 @@ fn level(k: usize) -> &'static Level {
         let count = ((NU_HI - NU_LO + 2.0 * LEVEL_MARGIN_SIGMAS * s) / h).ceil() as usize + 2;
         let points = (0..count)
             .map(|i| {
-                let m = smoothed_weight(mu0 + i as f64 * h, s);
+                let (m, dm) = smoothed_weight_with_slope(mu0 + i as f64 * h, s);
                 if m[3] > 1e-30 {
+                    let e = m[3];
+                    let de = dm[3] / e;
+                    let r = |c: usize| m[c] / e;
+                    let dr = |c: usize| (dm[c] - r(c) * dm[3]) / e;
                     [
-                        m[3].ln() as f32,
-                        (m[0] / m[3]) as f32,
-                        (m[1] / m[3]) as f32,
-                        (m[2] / m[3]) as f32,
+                        e.ln() as f32,
+                        r(0) as f32,
+                        r(1) as f32,
+                        r(2) as f32,
+                        de as f32,
+                        dr(0) as f32,
+                        dr(1) as f32,
+                        dr(2) as f32,
                     ]
                 } else {
-                    [-69.0, 0.0, 0.0, 0.0]
+                    [-69.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
                 }
             })
             .collect();
@@ -229,9 +244,17 @@ struct RgbPlan {
     levels: std::ops::RangeInclusive<usize>,
 }
 
+/// How far the period may move from the built one in a program that reads
+/// it (`RgbPlan::new`): beyond the 2% a renderer moves it without a
+/// rebuild, and the parameter tests' sweeps of +-5%.
+const PERIOD_REACH: f64 = 1.06;
+
 impl RgbPlan {
-    fn new(p: &PeriodicSurface) -> Option<RgbPlan> {
-        let (l, lam) = (p.coherence_um, p.period_um);
+    /// The plan for the material; `period_reach` > 1: for every period up
+    /// to that factor of the built one (more orders can fall in the band,
+    /// and narrower peaks, as the period grows).
+    fn new(p: &PeriodicSurface, period_reach: f64) -> Option<RgbPlan> {
+        let (l, lam) = (p.coherence_um, p.period_um * period_reach);
         let slack = RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * l);
         // orders_in_band: an interval of length (|u| (nu_hi - nu_lo) + 2
         // slack) Lam, |u| <= 2.
@@ -355,8 +378,10 @@ impl<'a> Reflectance<'a> {
 }
 
 /// The material's levels of the smoothed weight as program tables, and the
-/// pair's two levels.
+/// pair's two levels. `cubic`: a Hermite in mu (C1: a differentiated
+/// period moves mu; 16 gathers per level), else linear (8).
 struct SmoothedWeight<'a> {
+    cubic: bool,
     points: Table,
     /// Per level j of the pair's pair of levels: [offset, mu0, 1/h, last].
     level: [[Value<'a>; 4]; 2],
@@ -365,14 +390,14 @@ struct SmoothedWeight<'a> {
 }
 
 impl<'a> SmoothedWeight<'a> {
-    fn new(b: &'a Builder, plan: &RgbPlan, t: Value<'a>) -> SmoothedWeight<'a> {
+    fn new(b: &'a Builder, plan: &RgbPlan, t: Value<'a>, cubic: bool) -> SmoothedWeight<'a> {
         let mut points = Vec::new();
         let mut meta = Vec::new();
         let mut ts = Vec::new();
         for k in plan.levels.clone() {
             let lv = level(k);
             meta.extend([
-                (points.len() / POINT) as f32,
+                (points.len() / STRIDE) as f32,
                 lv.mu0 as f32,
                 (1.0 / lv.h) as f32,
                 (lv.points.len() - 1) as f32,
@@ -392,6 +417,7 @@ impl<'a> SmoothedWeight<'a> {
         let (t0, t1) = (get(j, 4), get(j + 1.0, 4));
         let inv_dt = 1.0 / (t1 - t0);
         SmoothedWeight {
+            cubic,
             points: b.table(points),
             level,
             tau: ((t - t0) * inv_dt).clamp(0.0, 1.0),
@@ -405,13 +431,42 @@ impl<'a> SmoothedWeight<'a> {
         let per_level = |lv: &[Value<'a>; 4]| -> ([Value<'a>; POINT], [Value<'a>; POINT]) {
             let [offset, mu0, inv_h, last] = *lv;
             let x = ((mu - mu0) * inv_h).clamp(0.0, last);
+            if self.cubic {
+                // Hermite between points i and i + 1 in their values and
+                // slopes (per unit mu; h = 1 / inv_h).
+                let i = x.floor().min(last - 1.0);
+                let f = x - i;
+                let at = (offset + i) * STRIDE as f64;
+                let g = |k: usize| b.gather(self.points, at + k as f64);
+                let h = 1.0 / inv_h;
+                let (f2, f3) = (f * f, f * f * f);
+                let (h00, h10) = (f3 * 2.0 - f2 * 3.0 + 1.0, f3 - f2 * 2.0 + f);
+                let (h01, h11) = (f2 * 3.0 - f3 * 2.0, f3 - f2);
+                let (d00, d10) = (f2 * 6.0 - f * 6.0, f2 * 3.0 - f * 4.0 + 1.0);
+                let (d01, d11) = (f * 6.0 - f2 * 6.0, f2 * 3.0 - f * 2.0);
+                let parts: [[Value<'a>; 4]; POINT] = std::array::from_fn(|q| {
+                    let (p0, p1) = (g(q), g(STRIDE + q));
+                    let (m0, m1) = (g(POINT + q) * h, g(STRIDE + POINT + q) * h);
+                    [p0, m0, p1, m1]
+                });
+                return (
+                    std::array::from_fn(|q| {
+                        let [p0, m0, p1, m1] = parts[q];
+                        p0 * h00 + m0 * h10 + p1 * h01 + m1 * h11
+                    }),
+                    std::array::from_fn(|q| {
+                        let [p0, m0, p1, m1] = parts[q];
+                        (p0 * d00 + m0 * d10 + p1 * d01 + m1 * d11) * inv_h
+                    }),
+                );
+            }
             let i = x.floor().min(last - 1.0);
             let f = x - i;
-            let at = (offset + i) * POINT as f64;
+            let at = (offset + i) * STRIDE as f64;
             let p0: [Value<'a>; POINT] =
                 std::array::from_fn(|q| b.gather(self.points, at + q as f64));
             let p1: [Value<'a>; POINT] =
-                std::array::from_fn(|q| b.gather(self.points, at + (POINT + q) as f64));
+                std::array::from_fn(|q| b.gather(self.points, at + (STRIDE + q) as f64));
             (
                 std::array::from_fn(|q| p0[q] + (p1[q] - p0[q]) * f),
                 std::array::from_fn(|q| (p1[q] - p0[q]) * inv_h),
@@ -504,13 +559,30 @@ impl Periodic {
         factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
         let p = &self.surface;
-        let plan = RgbPlan::new(p)?;
+        // The period, the profile's height (and a rect's width) as
+        // parameters, as in the spectral kernel; the coherence length stays
+        // the built one (the smoothed weight's levels, linear in t, are
+        // picked by it). A program that may see another period (not
+        // `at_built`) plans for periods up to PERIOD_REACH times the built
+        // one and reads the smoothed weight C1 in mu, which the period moves.
+        // (Where that plan would unroll more than MAX_RGB_ORDERS, the
+        // period stays a constant.)
+        let reaching = (!b.at_built())
+            .then(|| RgbPlan::new(p, PERIOD_REACH))
+            .flatten();
+        let follows_period = reaching.is_some();
+        let plan = match reaching {
+            Some(plan) => plan,
+            None => RgbPlan::new(p, 1.0)?,
+        };
         let powers = PowerProgram::new(b, p);
-        // The profile's height (and a rect's width) as parameters, as in
-        // the spectral kernel; the period and coherence stay the built ones
-        // (the smoothed weight's levels and the orders' plan are built for
-        // them).
-        let profile = p.profile_program(b, b.c(p.period_um));
+        let lam = if follows_period {
+            b.param(ParamId::PeriodUm, p.period_um)
+        } else {
+            b.c(p.period_um)
+        };
+        let inv_lam = 1.0 / lam;
+        let profile = p.profile_program(b, lam);
         // |c_n|^2 at beta for an order's part prepared once per order
         let power_rgb =
             |beta: Value<'a>, n: Value<'a>, rect: Option<RectOrder<'a>>| match (profile, rect) {
@@ -522,7 +594,7 @@ impl Periodic {
             ProfileProgram::Scaled(_) => None,
         };
         let (u, v, w) = (pair.u, pair.v, pair.w);
-        let (l, lam) = (p.coherence_um, p.period_um);
+        let l = p.coherence_um;
         let two_pi_l = 2.0 * PI * l;
         let refl = Reflectance::new(b, shading.fresnel, pair.cos_half);
         // F^2 (1 when flat: applied at the end) times the factor, at a
@@ -552,8 +624,8 @@ impl Periodic {
             & v.finite()
             & (v * (two_pi_l * NU_LO)).sq().le(RGB_TAIL_EXPONENT);
         let peak = |n: Value<'a>| -> OrderPeak<'a> {
-            let a_n = (n * v * (two_pi_l / lam)).sq() * inv_rho2;
-            let mu = u * n * inv_rho2 * (1.0 / lam);
+            let a_n = (n * v * inv_lam * two_pi_l).sq() * inv_rho2;
+            let mu = u * n * inv_rho2 * inv_lam;
             let nearest = mu.clamp(NU_LO, NU_HI);
             let gap = (nearest - mu).sq() / (t * 2.0);
             let take = a_n.le(RGB_TAIL_EXPONENT) & (a_n + gap).le(RGB_TAIL_EXPONENT);
@@ -568,7 +640,7 @@ impl Periodic {
         let (x0, x1) = (xa.min(xb), xa.max(xb));
         let n_first = -((slack - x0) * lam).floor(); // ceil((x0 - slack) Lam)
         let n_last = ((x1 + slack) * lam).floor();
-        let table = SmoothedWeight::new(b, &plan, t);
+        let table = SmoothedWeight::new(b, &plan, t, follows_period);
         let norm = s * (2.0 * PI).sqrt();
         let mut narrow_sum = [b.c(0.0); 3];
         for i in 0..plan.narrow_orders {
@@ -625,7 +697,7 @@ impl Periodic {
             let ev = (v * (two_pi_l * nu)).sq();
             let mut sum = b.c(0.0);
             for &(n, take, rect) in &orders {
-                let d = (u * nu - n / lam) * two_pi_l;
+                let d = (u * nu - inv_lam * n) * two_pi_l;
                 let e = d.fma(d, ev);
                 let power = match (rect, s2, &at) {
                     (Some(r), Some(s2), _) => r.power(s2),
