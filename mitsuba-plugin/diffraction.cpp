@@ -143,7 +143,7 @@ Diffraction BSDF (:monosp:`diffraction`)
      ``docs/energy.md``); ``stam``: the paper's formula, which near grazing
      directions can reflect several times what it receives. AD variants: a
      parameter's first gradient rebuilds the material once with the table's
-     derivatives, which gradients then follow (``docs/inverse.md``). (Default:
+     derivative along it, which gradients then follow (``docs/inverse.md``). (Default:
      ``conserving``; ``stam`` with a ``sigma_um`` texture)
    - |exposed| (a string)
  * - series_tolerance
@@ -467,7 +467,7 @@ public:
                     if (p.kind == Param::Number)
                         p.value = scalar_of(p.diff, p.name);
                 m_twist = scalar_of(m_twist_diff, "twist");
-                m_energy_derivatives |= diffraction_detail::any_gradient(m_params);
+                diffraction_detail::add_gradient_names(m_params, m_energy_derivatives);
             }
             check_frame();
             Core core = build_core();
@@ -629,9 +629,10 @@ private:
     /// material is rebuilt.
     bool update_without_rebuild(const std::vector<std::string> &keys) {
         if constexpr (dr::is_jit_v<Float>) {
-            // A first gradient: rebuilt with the energy table's derivatives
-            if (keys.empty() ||
-                (!m_energy_derivatives && diffraction_detail::any_gradient(m_params)))
+            // A parameter's first gradient: rebuilt with the energy table's
+            // derivative along it
+            std::vector<std::string> names = m_energy_derivatives;
+            if (keys.empty() || diffraction_detail::add_gradient_names(m_params, names))
                 return false;
             for (const std::string &k : keys) {
                 if (k == "twist" || m_textures.owns(k))
@@ -971,7 +972,7 @@ private:
     CorePtr m_core;
     uint32_t m_core_flags = 0;
     bool m_has_coherent = false;
-    bool m_energy_derivatives = false; // a parameter carried a gradient: see build_json
+    std::vector<std::string> m_energy_derivatives; // carried a gradient: see build_json
     std::string m_warnings, m_pending_warnings; // logged, and of the core in use
 
     // JIT variants: the core's programs, and every program's tables in one

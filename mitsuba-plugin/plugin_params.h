@@ -106,11 +106,12 @@ template <typename Float> std::string number_text(const PluginParam<Float> &p) {
     return buf;
 }
 
-/// The core's JSON parameter object; `energy_derivatives`: ask the core for
-/// its energy table's derivatives, which its programs then follow
+/// The core's JSON parameter object; `energy_derivatives`: the parameters
+/// along which the core builds its energy table's derivatives, which its
+/// programs then follow
 template <typename Float>
 std::string build_json(const std::vector<PluginParam<Float>> &params,
-                       bool energy_derivatives = false) {
+                       const std::vector<std::string> &energy_derivatives = {}) {
     using P = PluginParam<Float>;
     std::string top, nested;
     for (const P &p : params) {
@@ -130,18 +131,29 @@ std::string build_json(const std::vector<PluginParam<Float>> &params,
     }
     if (!nested.empty())
         top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
-    if (energy_derivatives)
-        top += (top.empty() ? "" : ", ") + json_escape("energy_derivatives") + ": true";
+    if (!energy_derivatives.empty()) {
+        std::string list;
+        for (const std::string &name : energy_derivatives)
+            list += (list.empty() ? "" : ", ") + json_escape(name);
+        top += (top.empty() ? "" : ", ") + json_escape("energy_derivatives") + ": [" + list + "]";
+    }
     return "{" + top + "}";
 }
 
-/// Whether a number parameter carries a gradient (JIT variants): the core
-/// is then asked for its energy table's derivatives (build_json)
-template <typename Float> bool any_gradient(const std::vector<PluginParam<Float>> &params) {
+/// Adds to `names` the number parameters that carry a gradient (JIT
+/// variants), for which the core is asked for its energy table's
+/// derivatives (build_json); returns whether any was new
+template <typename Float>
+bool add_gradient_names(const std::vector<PluginParam<Float>> &params,
+                        std::vector<std::string> &names) {
+    bool added = false;
     for (const PluginParam<Float> &p : params)
-        if (p.kind == PluginParam<Float>::Number && dr::grad_enabled(p.diff))
-            return true;
-    return false;
+        if (p.kind == PluginParam<Float>::Number && dr::grad_enabled(p.diff) &&
+            std::find(names.begin(), names.end(), p.name) == names.end()) {
+            names.push_back(p.name);
+            added = true;
+        }
+    return added;
 }
 
 /// The parameters as the object's string form lists them ("  name = value,")

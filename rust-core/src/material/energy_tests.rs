@@ -341,7 +341,7 @@ fn energy_derivatives_follow_rebuilt_tables() {
     for (json, kinds) in cases {
         let base = MaterialParams::from_json(json).unwrap();
         let with = Brdf::new(MaterialParams {
-            energy_derivatives: true,
+            energy_derivatives: base.surface.table_params().iter().map(|p| p.0).collect(),
             ..base.clone()
         })
         .unwrap();
@@ -417,4 +417,36 @@ fn energy_derivatives_follow_rebuilt_tables() {
             }
         }
     }
+}
+
+/// `"energy_derivatives"` builds only what it names (each costs two table
+/// builds): a list, true for every parameter the table depends on, and
+/// names the table does not depend on passed over.
+#[test]
+fn energy_derivatives_are_built_for_the_named_parameters() {
+    use crate::program::ParamId;
+    let ids = |json: &str| -> Vec<ParamId> {
+        Brdf::from_json(json)
+            .unwrap()
+            .energy_derivatives()
+            .iter()
+            .map(|d| d.id)
+            .collect()
+    };
+    let g = r#""surface":"gaussian","sigma_um":0.12,"corr_um":1.5,"fresnel":0.9"#;
+    assert_eq!(
+        ids(&format!(
+            r#"{{{g},"energy_derivatives":["sigma_um","fresnel"]}}"#
+        )),
+        vec![ParamId::SigmaUm]
+    );
+    assert_eq!(
+        ids(&format!(r#"{{{g},"energy_derivatives":true}}"#)),
+        vec![ParamId::SigmaUm, ParamId::CorrUm]
+    );
+    assert!(ids(&format!("{{{g}}}")).is_empty());
+    assert!(ids(&format!(
+        r#"{{{g},"energy":"stam","energy_derivatives":true}}"#
+    ))
+    .is_empty());
 }

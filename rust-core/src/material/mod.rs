@@ -33,6 +33,7 @@ use crate::models::SurfaceParams;
 use crate::models::{f_spectral, RgbRule, Shading};
 use crate::optics::fresnel::{Fresnel, FresnelAtCos};
 use crate::optics::geometry::{normalize_direction, reflect, PairGeometry, MIN_COS};
+use crate::program::ParamId;
 use crate::special::finite_non_negative;
 use crate::spectrum::{self, gamut_map, in_band};
 use energy::{EnergyMode, EnergyTable, PairEnergy, TableDerivative};
@@ -57,7 +58,8 @@ pub struct Brdf {
 struct Energy {
     surface: SurfaceParams,
     table: OnceLock<Arc<EnergyTable>>,
-    derivatives: Option<OnceLock<Vec<TableDerivative>>>,
+    /// The parameters asked for, and the derivatives once built.
+    derivatives: (Vec<ParamId>, OnceLock<Vec<TableDerivative>>),
 }
 
 /// Energy tables built in this process, by their surface parameters (the
@@ -100,7 +102,7 @@ fn energy_table_of(surface: &SurfaceParams) -> Option<Arc<EnergyTable>> {
         surface: surface.clone(),
         fresnel: Fresnel::Constant(1.0),
         energy: EnergyMode::Stam,
-        energy_derivatives: false,
+        energy_derivatives: Vec::new(),
     })
     .ok()?;
     Some(cached_energy_table(surface, || {
@@ -125,7 +127,7 @@ impl Brdf {
         let energy = (params.energy == EnergyMode::Conserving).then(|| Energy {
             surface: params.surface.clone(),
             table: OnceLock::new(),
-            derivatives: params.energy_derivatives.then(OnceLock::new),
+            derivatives: (params.energy_derivatives.clone(), OnceLock::new()),
         });
         Ok(Brdf {
             surface,
@@ -147,15 +149,16 @@ impl Brdf {
     }
 
     /// The energy table's derivatives along the surface's program
-    /// parameters (`"energy_derivatives": true`; else empty), built on
+    /// parameters that `"energy_derivatives"` names (else empty), built on
     /// first use.
     pub fn energy_derivatives(&self) -> &[TableDerivative] {
         let Some(energy) = self.energy.as_ref() else {
             return &[];
         };
-        let Some(derivatives) = energy.derivatives.as_ref() else {
+        let (asked, derivatives) = &energy.derivatives;
+        if asked.is_empty() {
             return &[];
-        };
+        }
         derivatives.get_or_init(|| {
             let centre = self.energy_table().expect("a conserving material");
             let at = |id, value| energy_table_of(&energy.surface.with_param(id, value));
@@ -163,6 +166,7 @@ impl Brdf {
                 .surface
                 .table_params()
                 .into_iter()
+                .filter(|(id, _)| asked.contains(id))
                 .filter_map(|(id, p0)| {
                     let step = energy::DERIVATIVE_STEP.exp();
                     let (below, above) = (at(id, p0 / step), at(id, p0 * step));

@@ -14,6 +14,7 @@ pub use crate::models::periodic::params::{
 };
 pub use crate::models::SurfaceParams;
 use crate::optics::fresnel::{metal_by_name, metal_names, Fresnel};
+use crate::program::ParamId;
 use serde_json::Value;
 
 /// Accepted ranges of the material's own keys.
@@ -33,11 +34,13 @@ pub struct MaterialParams {
     /// docs/energy.md) or "stam" (the paper's formula). A sigma texture's
     /// default is "stam".
     pub energy: EnergyMode,
-    /// With "conserving": also build the energy table's derivatives along
-    /// the surface's program parameters, which the programs then follow
-    /// (`"energy_derivatives": true`; a renderer sets it once a parameter
-    /// carries a gradient: they cost two table builds per parameter).
-    pub energy_derivatives: bool,
+    /// With "conserving": the parameters along which to build the energy
+    /// table's derivatives, which the programs then follow
+    /// (`"energy_derivatives"`: a list of names, or true for every
+    /// parameter the table depends on; a renderer sets it for the
+    /// parameters that carry a gradient: each costs two table builds).
+    /// Names the table does not depend on are passed over.
+    pub energy_derivatives: Vec<ParamId>,
 }
 
 fn err(msg: String) -> StamError {
@@ -77,22 +80,49 @@ impl MaterialParams {
                 "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma); leave 'energy' out or set it to \"stam\"".to_string(),
             ));
         }
-        let energy_derivatives = match obj.get("energy_derivatives") {
-            None => false,
-            Some(Value::Bool(b)) => *b,
-            Some(other) => {
-                return Err(err(format!(
-                    "parameter 'energy_derivatives' must be true or false, got {}",
-                    type_name(other)
-                )))
-            }
-        };
+        let energy_derivatives = parse_energy_derivatives(obj.get("energy_derivatives"), &surface)?;
         Ok(MaterialParams {
             surface,
             fresnel,
             energy,
             energy_derivatives,
         })
+    }
+}
+
+/// `"energy_derivatives"`: true (every parameter the table depends on),
+/// false, or a list of parameter names (ParamId::name).
+fn parse_energy_derivatives(
+    value: Option<&Value>,
+    surface: &SurfaceParams,
+) -> Result<Vec<ParamId>, StamError> {
+    let names = || {
+        ParamId::ALL
+            .iter()
+            .map(|p| p.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match value {
+        None | Some(Value::Bool(false)) => Ok(Vec::new()),
+        Some(Value::Bool(true)) => Ok(surface.table_params().into_iter().map(|p| p.0).collect()),
+        Some(Value::Array(list)) => list
+            .iter()
+            .map(|v| {
+                v.as_str()
+                    .and_then(|s| ParamId::ALL.into_iter().find(|p| p.name() == s))
+                    .ok_or_else(|| {
+                        err(format!(
+                            "parameter 'energy_derivatives' lists {v}, not a parameter name (accepted: {})",
+                            names()
+                        ))
+                    })
+            })
+            .collect(),
+        Some(other) => Err(err(format!(
+            "parameter 'energy_derivatives' must be true, false or a list of parameter names, got {}",
+            type_name(other)
+        ))),
     }
 }
 
@@ -262,8 +292,18 @@ mod tests {
         );
         let m = message(r#"{"surface":"cd","energy_derivatives":1}"#);
         assert!(
-            m.contains("'energy_derivatives' must be true or false"),
+            m.contains("'energy_derivatives' must be true, false or a list"),
             "{m}"
+        );
+        let m = message(r#"{"surface":"cd","energy_derivatives":["period"]}"#);
+        assert!(m.contains("\"period\", not a parameter name"), "{m}");
+        let p = MaterialParams::from_json(
+            r#"{"surface":"cd","energy_derivatives":["period_um","fresnel"]}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            p.energy_derivatives,
+            vec![ParamId::PeriodUm, ParamId::Fresnel]
         );
         let m = message(r#"{"surface":"cd","rgb_nodes":16}"#);
         assert!(m.contains("unknown parameter 'rgb_nodes'"), "{m}");
