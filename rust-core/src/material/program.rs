@@ -102,7 +102,17 @@ impl Brdf {
     /// for a conserving material (what tells which parameters the model's
     /// own part reads).
     fn program_with(&self, kind: ProgramKind, b: Builder, with_energy: bool) -> Option<Program> {
-        let energy = self.energy_table().filter(|_| with_energy);
+        // Only the reflectance kinds scale by the energy table (sampling
+        // and pdf follow Stam's strategy): the others build no table program
+        // and no derivatives.
+        let scales = matches!(
+            kind,
+            ProgramKind::EvalRgb
+                | ProgramKind::EvalSpectral
+                | ProgramKind::CoherentRgb
+                | ProgramKind::CoherentSpectral
+        );
+        let energy = self.energy_table().filter(|_| with_energy && scales);
         let derivatives = match energy {
             Some(_) if !b.at_built() => self.derivatives_read_by(kind),
             _ => Vec::new(),
@@ -219,8 +229,8 @@ impl Brdf {
 
     /// The energy table's derivatives along the parameters that the
     /// model's own part of the program of `kind` reads (a grating's RGB
-    /// programs hold the period as a constant: a derivative along it would
-    /// be half a gradient).
+    /// programs hold the coherence length as a constant: a derivative along
+    /// it would be half a gradient).
     fn derivatives_read_by(&self, kind: ProgramKind) -> Vec<&TableDerivative> {
         let all = self.energy_derivatives();
         if all.is_empty() {
