@@ -204,7 +204,7 @@ The parameters the user gives, ``twist`` and ``tracks`` always and
 numbers the material's programs read are differentiable (the Gaussian
 model's ``sigma_um`` and correlation lengths, the fractal's ``sigma_um``
 and ``lag_um``, a constant ``fresnel``, ``eta`` and ``k``, ``twist`` of anisotropic
-materials, in spectral variants a grating's period, coherence, height and width;
+materials, a grating's period, coherence, height and width;
 docs/inverse.md); the others are non-differentiable. Mitsuba's traversal carries numbers
 and registered types but no strings, so the string parameters travel as a
 ``mi.Properties`` whose plugin name is the value: ``params['fresnel'] =
@@ -467,7 +467,7 @@ public:
                     if (p.kind == Param::Number)
                         p.value = scalar_of(p.diff, p.name);
                 m_twist = scalar_of(m_twist_diff, "twist");
-                diffraction_detail::add_gradient_names(m_params, m_energy_derivatives);
+                diffraction_detail::add_gradient_names(m_params, m_gradients);
             }
             check_frame();
             Core core = build_core();
@@ -629,9 +629,9 @@ private:
     /// material is rebuilt.
     bool update_without_rebuild(const std::vector<std::string> &keys) {
         if constexpr (dr::is_jit_v<Float>) {
-            // A parameter's first gradient: rebuilt with the energy table's
-            // derivative along it
-            std::vector<std::string> names = m_energy_derivatives;
+            // A parameter's first gradient: rebuilt with programs that follow
+            // it smoothly (the energy table's derivative along it, ...)
+            std::vector<std::string> names = m_gradients;
             if (keys.empty() || diffraction_detail::add_gradient_names(m_params, names))
                 return false;
             for (const std::string &k : keys) {
@@ -714,7 +714,7 @@ private:
     /// the core's message (completed with the plugin's keys) when refused.
     Core build_core() const {
         Core c;
-        c.json = build_json(m_params, m_energy_derivatives);
+        c.json = build_json(m_params, m_gradients);
         char err[4096] = { 0 };
         c.ptr.reset(stam_brdf_new(c.json.c_str(), err, sizeof(err)));
         if (!c.ptr)
@@ -972,7 +972,7 @@ private:
     CorePtr m_core;
     uint32_t m_core_flags = 0;
     bool m_has_coherent = false;
-    std::vector<std::string> m_energy_derivatives; // carried a gradient: see build_json
+    std::vector<std::string> m_gradients; // carried a gradient: see build_json
     std::string m_warnings, m_pending_warnings; // logged, and of the core in use
 
     // JIT variants: the core's programs, and every program's tables in one

@@ -106,12 +106,13 @@ template <typename Float> std::string number_text(const PluginParam<Float> &p) {
     return buf;
 }
 
-/// The core's JSON parameter object; `energy_derivatives`: the parameters
-/// along which the core builds its energy table's derivatives, which its
-/// programs then follow
+/// The core's JSON parameter object; `gradients`: the parameters that have
+/// carried a gradient, which the core's programs follow smoothly (its
+/// energy table's derivatives along them; a grating's RGB reading C1 along
+/// its period and coherence length)
 template <typename Float>
 std::string build_json(const std::vector<PluginParam<Float>> &params,
-                       const std::vector<std::string> &energy_derivatives = {}) {
+                       const std::vector<std::string> &gradients = {}) {
     using P = PluginParam<Float>;
     std::string top, nested;
     for (const P &p : params) {
@@ -131,18 +132,18 @@ std::string build_json(const std::vector<PluginParam<Float>> &params,
     }
     if (!nested.empty())
         top += (top.empty() ? "" : ", ") + json_escape("fresnel") + ": {" + nested + "}";
-    if (!energy_derivatives.empty()) {
+    if (!gradients.empty()) {
         std::string list;
-        for (const std::string &name : energy_derivatives)
+        for (const std::string &name : gradients)
             list += (list.empty() ? "" : ", ") + json_escape(name);
-        top += (top.empty() ? "" : ", ") + json_escape("energy_derivatives") + ": [" + list + "]";
+        top += (top.empty() ? "" : ", ") + json_escape("gradients") + ": [" + list + "]";
     }
     return "{" + top + "}";
 }
 
 /// Adds to `names` the number parameters that carry a gradient (JIT
-/// variants), for which the core is asked for its energy table's
-/// derivatives (build_json); returns whether any was new
+/// variants), which the core's programs are asked to follow smoothly
+/// (build_json); returns whether any was new
 template <typename Float>
 bool add_gradient_names(const std::vector<PluginParam<Float>> &params,
                         std::vector<std::string> &names) {

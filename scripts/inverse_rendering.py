@@ -44,8 +44,9 @@ CASES = {
         'fixed': {'surface': 'gaussian', 'fresnel': 0.9},
         'variant': 'llvm_ad_rgb',
     },
-    # The grating's period: its spectral kernel reads it (the RGB programs
-    # keep it as a constant), so the case runs in llvm_ad_spectral.
+    # The grating's period, in llvm_ad_spectral: the RGB programs read it
+    # too (docs/inverse.md), but the spectral kernel is smaller and the loss
+    # has no gamut map bending it.
     'grating': {
         'truth': {'period_um': 1.2},
         'start': {'period_um': 1.56},

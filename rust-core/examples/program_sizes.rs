@@ -1,7 +1,11 @@
 //! Size of each exported program (instructions, table values, gathers) for
 //! the materials of `scripts/bench_render.py`, with the default and with
 //! Stam's formula: the JIT variants' cost per lane grows with the
-//! instructions a kernel traces (docs/plugin_speed.md).
+//! instructions a kernel traces (docs/plugin_speed.md). Rows "(built)":
+//! the program for the built parameters (STAM_PROGRAM_AT_BUILT), which an
+//! ordinary render runs, and "(gradients)": the plain program of the
+//! material built with `"gradients": true`, which a render that
+//! differentiates its parameters runs (rows only where they differ).
 //! Usage: cargo run --release -p stam-core --example program_sizes
 use stam::material::program::ProgramKind;
 use stam::program::Op;
@@ -33,12 +37,37 @@ fn main() {
                 let Some(p) = brdf.program(kind) else {
                     continue;
                 };
-                let gathers = p.code.iter().filter(|i| i.op == Op::Gather).count();
+                let gathers = |p: &stam::program::Program| {
+                    p.code.iter().filter(|i| i.op == Op::Gather).count()
+                };
                 println!(
-                    "| {name} | {energy} | {kind:?} | {} | {gathers} | {} |",
+                    "| {name} | {energy} | {kind:?} | {} | {} | {} |",
                     p.code.len(),
+                    gathers(&p),
                     p.table_len()
                 );
+                let differentiated = format!(r#"{{{body},"energy":"{energy}","gradients":true}}"#);
+                let differentiated = Brdf::from_json(&differentiated).expect("material");
+                if let Some(g) = differentiated.program(kind) {
+                    if g.encode() != p.encode() {
+                        println!(
+                            "| {name} | {energy} | {kind:?} (gradients) | {} | {} | {} |",
+                            g.code.len(),
+                            gathers(&g),
+                            g.table_len()
+                        );
+                    }
+                }
+                if let Some(lean) = brdf.program_at_built(kind) {
+                    if lean.code.len() != p.code.len() {
+                        println!(
+                            "| {name} | {energy} | {kind:?} (built) | {} | {} | {} |",
+                            lean.code.len(),
+                            gathers(&lean),
+                            lean.table_len()
+                        );
+                    }
+                }
             }
         }
     }

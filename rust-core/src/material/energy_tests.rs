@@ -304,7 +304,7 @@ fn random_surfaces_keep_stams_f_at_moderate_angles() {
     }
 }
 
-/// With `"energy_derivatives": true` a program's derivative along each
+/// With `"gradients": true` a program's derivative along each
 /// surface parameter it reads (what a renderer's AD sees) is the central
 /// difference of the native conserving material, whose table is rebuilt at
 /// each value: the aggregate error over random pairs (gratings: half on
@@ -341,7 +341,7 @@ fn energy_derivatives_follow_rebuilt_tables() {
     for (json, kinds) in cases {
         let base = MaterialParams::from_json(json).unwrap();
         let with = Brdf::new(MaterialParams {
-            energy_derivatives: base.surface.table_params().iter().map(|p| p.0).collect(),
+            gradients: base.surface.table_params().iter().map(|p| p.0).collect(),
             ..base.clone()
         })
         .unwrap();
@@ -419,7 +419,7 @@ fn energy_derivatives_follow_rebuilt_tables() {
     }
 }
 
-/// `"energy_derivatives"` builds only what it names (each costs two table
+/// `"gradients"` builds only what it names (each costs two table
 /// builds): a list, true for every parameter the table depends on, and
 /// names the table does not depend on passed over.
 #[test]
@@ -435,18 +435,13 @@ fn energy_derivatives_are_built_for_the_named_parameters() {
     };
     let g = r#""surface":"gaussian","sigma_um":0.12,"corr_um":1.5,"fresnel":0.9"#;
     assert_eq!(
-        ids(&format!(
-            r#"{{{g},"energy_derivatives":["sigma_um","fresnel"]}}"#
-        )),
+        ids(&format!(r#"{{{g},"gradients":["sigma_um","fresnel"]}}"#)),
         vec![ParamId::SigmaUm]
     );
     assert_eq!(
-        ids(&format!(r#"{{{g},"energy_derivatives":true}}"#)),
+        ids(&format!(r#"{{{g},"gradients":true}}"#)),
         vec![ParamId::SigmaUm, ParamId::CorrUm]
     );
     assert!(ids(&format!("{{{g}}}")).is_empty());
-    assert!(ids(&format!(
-        r#"{{{g},"energy":"stam","energy_derivatives":true}}"#
-    ))
-    .is_empty());
+    assert!(ids(&format!(r#"{{{g},"energy":"stam","gradients":true}}"#)).is_empty());
 }

@@ -51,10 +51,13 @@ pub struct Brdf {
     /// formula), built from the surface's parameters on the first
     /// evaluation.
     energy: Option<Energy>,
+    /// The parameters a renderer differentiates (`"gradients"`), which the
+    /// programs follow smoothly.
+    gradients: Vec<ParamId>,
 }
 
 /// What the energy table is built from, and the table once built; with
-/// `"energy_derivatives"`, its derivatives too.
+/// `"gradients"`, its derivatives along them too.
 struct Energy {
     surface: SurfaceParams,
     table: OnceLock<Arc<EnergyTable>>,
@@ -102,7 +105,7 @@ fn energy_table_of(surface: &SurfaceParams) -> Option<Arc<EnergyTable>> {
         surface: surface.clone(),
         fresnel: Fresnel::Constant(1.0),
         energy: EnergyMode::Stam,
-        energy_derivatives: Vec::new(),
+        gradients: Vec::new(),
     })
     .ok()?;
     Some(cached_energy_table(surface, || {
@@ -127,13 +130,14 @@ impl Brdf {
         let energy = (params.energy == EnergyMode::Conserving).then(|| Energy {
             surface: params.surface.clone(),
             table: OnceLock::new(),
-            derivatives: (params.energy_derivatives.clone(), OnceLock::new()),
+            derivatives: (params.gradients.clone(), OnceLock::new()),
         });
         Ok(Brdf {
             surface,
             fresnel: params.fresnel,
             rgb_rule,
             energy,
+            gradients: params.gradients,
         })
     }
 
@@ -149,8 +153,8 @@ impl Brdf {
     }
 
     /// The energy table's derivatives along the surface's program
-    /// parameters that `"energy_derivatives"` names (else empty), built on
-    /// first use.
+    /// parameters that `"gradients"` names (else empty), built on first
+    /// use.
     pub fn energy_derivatives(&self) -> &[TableDerivative] {
         let Some(energy) = self.energy.as_ref() else {
             return &[];

@@ -24,7 +24,7 @@ pub mod range {
 }
 
 /// The keys the material reads whatever its surface.
-const MATERIAL_KEYS: [&str; 4] = ["surface", "fresnel", "energy", "energy_derivatives"];
+const MATERIAL_KEYS: [&str; 4] = ["surface", "fresnel", "energy", "gradients"];
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialParams {
@@ -34,13 +34,13 @@ pub struct MaterialParams {
     /// docs/energy.md) or "stam" (the paper's formula). A sigma texture's
     /// default is "stam".
     pub energy: EnergyMode,
-    /// With "conserving": the parameters along which to build the energy
-    /// table's derivatives, which the programs then follow
-    /// (`"energy_derivatives"`: a list of names, or true for every
-    /// parameter the table depends on; a renderer sets it for the
-    /// parameters that carry a gradient: each costs two table builds).
-    /// Names the table does not depend on are passed over.
-    pub energy_derivatives: Vec<ParamId>,
+    /// The parameters a renderer differentiates (`"gradients"`: a list of
+    /// names, or true for all): with "conserving", the energy table's
+    /// derivatives are built along those it depends on (each costs two
+    /// table builds) and the programs follow them; a grating's RGB program
+    /// reads its smoothed weight C1 along the period and the coherence
+    /// length only where they are listed (docs/inverse.md).
+    pub gradients: Vec<ParamId>,
 }
 
 fn err(msg: String) -> StamError {
@@ -80,22 +80,19 @@ impl MaterialParams {
                 "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma); leave 'energy' out or set it to \"stam\"".to_string(),
             ));
         }
-        let energy_derivatives = parse_energy_derivatives(obj.get("energy_derivatives"), &surface)?;
+        let gradients = parse_gradients(obj.get("gradients"))?;
         Ok(MaterialParams {
             surface,
             fresnel,
             energy,
-            energy_derivatives,
+            gradients,
         })
     }
 }
 
-/// `"energy_derivatives"`: true (every parameter the table depends on),
-/// false, or a list of parameter names (ParamId::name).
-fn parse_energy_derivatives(
-    value: Option<&Value>,
-    surface: &SurfaceParams,
-) -> Result<Vec<ParamId>, StamError> {
+/// `"gradients"`: true (every parameter), false, or a list of parameter
+/// names (ParamId::name).
+fn parse_gradients(value: Option<&Value>) -> Result<Vec<ParamId>, StamError> {
     let names = || {
         ParamId::ALL
             .iter()
@@ -105,7 +102,7 @@ fn parse_energy_derivatives(
     };
     match value {
         None | Some(Value::Bool(false)) => Ok(Vec::new()),
-        Some(Value::Bool(true)) => Ok(surface.table_params().into_iter().map(|p| p.0).collect()),
+        Some(Value::Bool(true)) => Ok(ParamId::ALL.to_vec()),
         Some(Value::Array(list)) => list
             .iter()
             .map(|v| {
@@ -113,14 +110,14 @@ fn parse_energy_derivatives(
                     .and_then(|s| ParamId::ALL.into_iter().find(|p| p.name() == s))
                     .ok_or_else(|| {
                         err(format!(
-                            "parameter 'energy_derivatives' lists {v}, not a parameter name (accepted: {})",
+                            "parameter 'gradients' lists {v}, not a parameter name (accepted: {})",
                             names()
                         ))
                     })
             })
             .collect(),
         Some(other) => Err(err(format!(
-            "parameter 'energy_derivatives' must be true, false or a list of parameter names, got {}",
+            "parameter 'gradients' must be true, false or a list of parameter names, got {}",
             type_name(other)
         ))),
     }
@@ -287,24 +284,20 @@ mod tests {
             "{m}"
         );
         assert!(
-            m.contains("surface, fresnel, energy, energy_derivatives, period_um"),
+            m.contains("surface, fresnel, energy, gradients, period_um"),
             "{m}"
         );
-        let m = message(r#"{"surface":"cd","energy_derivatives":1}"#);
+        let m = message(r#"{"surface":"cd","gradients":1}"#);
         assert!(
-            m.contains("'energy_derivatives' must be true, false or a list"),
+            m.contains("'gradients' must be true, false or a list"),
             "{m}"
         );
-        let m = message(r#"{"surface":"cd","energy_derivatives":["period"]}"#);
+        let m = message(r#"{"surface":"cd","gradients":["period"]}"#);
         assert!(m.contains("\"period\", not a parameter name"), "{m}");
-        let p = MaterialParams::from_json(
-            r#"{"surface":"cd","energy_derivatives":["period_um","fresnel"]}"#,
-        )
-        .unwrap();
-        assert_eq!(
-            p.energy_derivatives,
-            vec![ParamId::PeriodUm, ParamId::Fresnel]
-        );
+        let p =
+            MaterialParams::from_json(r#"{"surface":"cd","gradients":["period_um","fresnel"]}"#)
+                .unwrap();
+        assert_eq!(p.gradients, vec![ParamId::PeriodUm, ParamId::Fresnel]);
         let m = message(r#"{"surface":"cd","rgb_nodes":16}"#);
         assert!(m.contains("unknown parameter 'rgb_nodes'"), "{m}");
         let m = message(

@@ -83,7 +83,13 @@ impl Brdf {
     /// (gratings) inside it (`FactorProgram`, at each wavelength the
     /// model's RGB integration takes).
     pub fn program(&self, kind: ProgramKind) -> Option<Program> {
-        self.program_with(kind, Builder::new(), true)
+        self.program_with(kind, self.plain_builder(), true)
+    }
+
+    /// The builder of the plain programs: for any parameter value, smooth
+    /// along the parameters the renderer differentiates.
+    fn plain_builder(&self) -> Builder {
+        Builder::new().differentiating(&self.gradients)
     }
 
     /// The program of `kind` for a renderer that runs it only with every
@@ -228,15 +234,14 @@ impl Brdf {
     }
 
     /// The energy table's derivatives along the parameters that the
-    /// model's own part of the program of `kind` reads (a grating's RGB
-    /// programs hold the coherence length as a constant: a derivative along
-    /// it would be half a gradient).
+    /// model's own part of the program of `kind` reads (a model's program
+    /// that held a parameter constant would get half a gradient along it).
     fn derivatives_read_by(&self, kind: ProgramKind) -> Vec<&TableDerivative> {
         let all = self.energy_derivatives();
         if all.is_empty() {
             return Vec::new();
         }
-        let Some(stam) = self.program_with(kind, Builder::new(), false) else {
+        let Some(stam) = self.program_with(kind, self.plain_builder(), false) else {
             return Vec::new();
         };
         all.iter()

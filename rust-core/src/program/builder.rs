@@ -24,6 +24,10 @@ pub struct Builder {
     /// value it is built with (no texture, no gradient): what only follows
     /// a change of parameter may be left out.
     at_built: bool,
+    /// The parameters the renderer differentiates: where a program can
+    /// follow a parameter more cheaply than smoothly (C1), it reads these
+    /// smoothly.
+    gradients: Vec<ParamId>,
 }
 
 /// A float register.
@@ -73,6 +77,18 @@ impl Builder {
     /// Whether the program will only see its parameters' built values.
     pub fn at_built(&self) -> bool {
         self.at_built
+    }
+
+    /// The builder for a renderer that differentiates `ids`.
+    pub fn differentiating(mut self, ids: &[ParamId]) -> Builder {
+        self.gradients = ids.to_vec();
+        self
+    }
+
+    /// Whether the renderer differentiates parameter `id` (never in a
+    /// program for the built values).
+    pub fn differentiated(&self, id: ParamId) -> bool {
+        !self.at_built && self.gradients.contains(&id)
     }
 
     fn push(&self, op: Op, a: u32, b: u32, c: u32) -> u32 {

@@ -14,7 +14,7 @@ use glam::DVec3;
 
 /// A material: its JSON with `$name` (ParamId::name) where each parameter's
 /// value goes, and the values. Every parameter its programs read must be
-/// listed (`values` panics otherwise).
+/// listed (`values` panics otherwise). Built with `"gradients": true`.
 #[derive(Clone, Copy)]
 pub struct Case {
     pub name: &'static str,
@@ -42,7 +42,11 @@ impl Case {
             json = json.replace(&key, &format!("{v:?}"));
         }
         assert!(!json.contains('$'), "{}: {json}", self.name);
-        let json = crate::testing::stam_formula(&json);
+        // Built as a renderer builds a material whose parameters carry
+        // gradients: the programs follow them smoothly (C1).
+        let mut value: serde_json::Value = serde_json::from_str(&json).expect("JSON");
+        value["gradients"] = serde_json::Value::Bool(true);
+        let json = crate::testing::stam_formula(&value.to_string());
         Brdf::from_json(&json).unwrap_or_else(|e| panic!("{}: {json}: {e}", self.name))
     }
 }

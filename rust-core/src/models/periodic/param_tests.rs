@@ -3,10 +3,10 @@
 //! (rect), checked with the shared harness (testing::params) at lanes on
 //! the flanks of the order peaks: a change of 0.5% and 2% against the
 //! changed material, the f64 derivative against native differences, and a
-//! smoothness sweep. The RGB program reads the period (its orders planned
-//! for periods up to 6% longer, its smoothed weight C1 in mu), the height
-//! and width, and keeps the coherence length a constant (its smoothed
-//! weight's levels in t are linear).
+//! smoothness sweep. The RGB program reads them too: its orders are planned
+//! for periods up to 6% longer and coherence lengths within 6%, and its
+//! smoothed weight is read C1 in mu (which the period moves) and in t (which
+//! the coherence length moves).
 
 use crate::material::program::ProgramKind;
 use crate::program::ParamId::{self, *};
@@ -73,29 +73,30 @@ const CASES: [(Case, &[ParamId]); 3] = [
     ),
 ];
 
-/// The RGB program: the period, the profile's height and a rect's width
-/// (the coherence length stays a constant there);
-/// against the native RGB path within the rule's error, as
-/// optics/param_tests.rs holds gratings.
+/// The RGB program: the period, the coherence length, the profile's height
+/// and a rect's width; against the native RGB path within the rule's error,
+/// as optics/param_tests.rs holds gratings. Derivatives down to 1e-8 of the
+/// peak within 5%: on lanes there whose colour the gamut map moves (a
+/// channel clamped at 0, the others carrying its luminance), the map
+/// magnifies the tables' error in the clamped channel; the largest errors,
+/// 3.8% (period) and 2.9% (coherence), are there (2026-12-03), and above
+/// 1e-7 of the peak they are at most 1.2%. (The materials are built with
+/// `"gradients": true`, as for a renderer that differentiates them.)
 const PERIODIC_RGB: Tolerances = Tolerances {
     vs_native: 5e-3,
     derivative_floor: 1e-8,
+    derivative_rel: 0.05,
     ..TOLERANCES
 };
 
 #[test]
-fn periodic_rgb_profile_parameters_follow_the_changed_material() {
+fn periodic_rgb_parameters_follow_the_changed_material() {
     let mut failures = Vec::new();
     for (case, ids) in CASES {
-        let profile: Vec<ParamId> = ids
-            .iter()
-            .copied()
-            .filter(|id| matches!(id, PeriodUm | HeightUm | WidthUm))
-            .collect();
         failures.extend(check(
             &case,
             &[ProgramKind::EvalRgb],
-            &profile,
+            ids,
             PERIODIC_RGB,
             2000,
         ));

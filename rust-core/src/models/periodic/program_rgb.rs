@@ -15,10 +15,11 @@
 //! levels of t, each a uniform grid in mu, as ln E and the ratios W~_c / E
 //! with E = X + Y + Z smoothed alike (positive: the exponential tails of
 //! the band are linear in ln E, so that the interpolation keeps them, and
-//! the ratios vary slowly), with their exact slopes in mu; within a level
-//! linear in mu, or, in a program that reads the period (which moves mu),
-//! a cubic Hermite in the values and slopes (C1); linear in t between two
-//! levels. Where the native path takes the 3-point Gauss-Hermite rule
+//! the ratios vary slowly), with their exact slopes in mu, in t and in
+//! both; read linearly in mu and t, or C1 (Hermites from the slopes) along
+//! the period (which moves mu) and the coherence length (which moves t)
+//! where the renderer differentiates them (`SmoothedWeight`). Where the
+//! native path takes the 3-point Gauss-Hermite rule
 //! on the weight (peaks narrower than a quarter nanometre) the table is the
 //! exact value the rule approximates.
 //!
@@ -66,9 +67,9 @@ const LEVEL_H_MAX: f64 = 0.002;
 const LEVEL_MARGIN_SIGMAS: f64 = 9.0;
 const MAX_LEVELS: usize = 128;
 /// Values per grid point: ln E and the three ratios, then their slopes in
-/// mu (POINT of each).
+/// mu, in t, and in mu and t (POINT of each).
 const POINT: usize = 4;
-const STRIDE: usize = 2 * POINT;
+const STRIDE: usize = 4 * POINT;
 
 /// Columns of the metals' reflectance table over wavenumber, rows over
 /// sqrt(cos) (as the native grid).
@@ -81,7 +82,7 @@ struct Level {
     mu0: f64,
     h: f64,
     /// [ln E, W~_R / E, W~_G / E, W~_B / E] at mu0 + i h, then their
-    /// derivatives in mu.
+    /// derivatives in mu, in t and in mu and t.
     points: Vec<[f32; STRIDE]>,
 }
 
@@ -155,16 +156,19 @@ fn inverse3(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
     })
 }
 
-/// (W * N_s)(mu) for the channels and E: the exact integral of the
-/// piecewise-linear (in nu) weight against the normalised Gaussian, cell by
-/// cell (erf), within 9 s of mu; and its derivative in mu, (W' * N_s)(mu):
-/// the cells' slopes against the same Gaussian.
-fn smoothed_weight_with_slope(mu: f64, s: f64) -> ([f64; 4], [f64; 4]) {
+/// (W * N_s)(mu) for the channels and E, and its first three derivatives
+/// in mu: the exact integral of the piecewise-linear (in nu) weight against
+/// the normalised Gaussian, cell by cell (erf), within 9 s of mu; (W' *
+/// N_s)(mu), the cells' slopes against the same Gaussian; and, as W'' is
+/// the slopes' jumps at the nodes, the Gaussian at the nodes and its slope.
+/// The weight ends at the band's ends (a jump where the matching functions
+/// are not quite 0), whose terms the derivatives include.
+fn smoothed_weight_derivatives(mu: f64, s: f64) -> [[f64; 4]; 4] {
     let (nu, w) = weight_nodes();
-    let (mut out, mut slope_out) = ([0.0; 4], [0.0; 4]);
+    let mut out = [[0.0; 4]; 4];
     let (lo, hi) = (mu - LEVEL_MARGIN_SIGMAS * s, mu + LEVEL_MARGIN_SIGMAS * s);
     if hi <= nu[0] || lo >= nu[nu.len() - 1] {
-        return (out, slope_out);
+        return out;
     }
     let k_lo = nu.partition_point(|&x| x <= lo).saturating_sub(1);
     let k_hi = nu
@@ -172,12 +176,26 @@ fn smoothed_weight_with_slope(mu: f64, s: f64) -> ([f64; 4], [f64; 4]) {
         .min(nu.len() - 1)
         .max(k_lo + 1);
     let inv = 1.0 / (SQRT_2 * s);
+    let inv_t = 1.0 / (s * s);
     let node = |k: usize| {
         let x = nu[k] - mu;
         let z = x * inv;
         (x, (-z * z).exp(), libm::erfc(z.abs()), z)
     };
     let (mut a, mut ga, mut ea, mut za) = node(k_lo);
+    // The ends' jumps: W(nu_0) at the start, -W(nu_last) at the end, times
+    // N_s(x) and its derivatives in mu, (x / t) N_s and (x^2 / t - 1) N_s / t.
+    let n_s = |x: f64| (-0.5 * x * x * inv_t).exp() / ((2.0 * PI).sqrt() * s);
+    let ends = [(0, 1.0), (nu.len() - 1, -1.0)];
+    for (k, sign) in ends.into_iter().filter(|&(k, _)| k >= k_lo && k <= k_hi) {
+        let x = nu[k] - mu;
+        let g = sign * n_s(x);
+        for c in 0..4 {
+            out[1][c] += w[k][c] * g;
+            out[2][c] += w[k][c] * g * x * inv_t;
+            out[3][c] += w[k][c] * g * (x * x * inv_t - 1.0) * inv_t;
+        }
+    }
     for k in k_lo..k_hi {
         let (b, gb, eb, zb) = node(k + 1);
         let derf = if za >= 0.0 {
@@ -187,17 +205,21 @@ fn smoothed_weight_with_slope(mu: f64, s: f64) -> ([f64; 4], [f64; 4]) {
         } else {
             2.0 - ea - eb
         };
-        // Normalised: int N_s(x) dx and int x N_s(x) dx over the cell.
+        // Normalised: int N_s(x) dx and int x N_s(x) dx over the cell;
+        // N_s at its ends (times s^2), and d/dmu of that, x N_s(x) / s^2.
         let i0 = 0.5 * derf;
         let i1 = s / (2.0 * PI).sqrt() * (ga - gb);
+        let i2 = s / (2.0 * PI).sqrt() * (a * ga - b * gb) * inv_t;
         for c in 0..4 {
             let slope = (w[k + 1][c] - w[k][c]) / (b - a);
-            out[c] += (w[k][c] - slope * a) * i0 + slope * i1;
-            slope_out[c] += slope * i0;
+            out[0][c] += (w[k][c] - slope * a) * i0 + slope * i1;
+            out[1][c] += slope * i0;
+            out[2][c] += slope * i1 * inv_t;
+            out[3][c] += slope * i2 * inv_t;
         }
         (a, ga, ea, za) = (b, gb, eb, zb);
     }
-    (out, slope_out)
+    out
 }
 
 fn level(k: usize) -> &'static Level {
@@ -210,25 +232,34 @@ fn level(k: usize) -> &'static Level {
         let count = ((NU_HI - NU_LO + 2.0 * LEVEL_MARGIN_SIGMAS * s) / h).ceil() as usize + 2;
         let points = (0..count)
             .map(|i| {
-                let (m, dm) = smoothed_weight_with_slope(mu0 + i as f64 * h, s);
-                if m[3] > 1e-30 {
-                    let e = m[3];
-                    let de = dm[3] / e;
-                    let r = |c: usize| m[c] / e;
-                    let dr = |c: usize| (dm[c] - r(c) * dm[3]) / e;
-                    [
-                        e.ln() as f32,
-                        r(0) as f32,
-                        r(1) as f32,
-                        r(2) as f32,
-                        de as f32,
-                        dr(0) as f32,
-                        dr(1) as f32,
-                        dr(2) as f32,
-                    ]
-                } else {
-                    [-69.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+                // W~ and its slopes in mu (m1), in t (the heat equation:
+                // dW~/dt = W~'' / 2) and in both (W~''' / 2).
+                let [m, m1, m2, m3] = smoothed_weight_derivatives(mu0 + i as f64 * h, s);
+                let (mt, mmt): ([f64; 4], [f64; 4]) = (m2.map(|x| 0.5 * x), m3.map(|x| 0.5 * x));
+                let mut point = [0.0f32; STRIDE];
+                if m[3] <= 1e-30 {
+                    point[0] = -69.0;
+                    return point;
                 }
+                // ln E and the ratios r_c = W~_c / E, with their slopes.
+                let e = m[3];
+                let (lm, lt) = (m1[3] / e, mt[3] / e);
+                let lmt = mmt[3] / e - lt * lm;
+                point[0] = e.ln() as f32;
+                point[POINT] = lm as f32;
+                point[2 * POINT] = lt as f32;
+                point[3 * POINT] = lmt as f32;
+                for c in 0..3 {
+                    let r = m[c] / e;
+                    let rm = (m1[c] - r * m1[3]) / e;
+                    let rt = (mt[c] - r * mt[3]) / e;
+                    let rmt = (mmt[c] - rm * mt[3] - r * mmt[3]) / e - rt * lm;
+                    point[1 + c] = r as f32;
+                    point[POINT + 1 + c] = rm as f32;
+                    point[2 * POINT + 1 + c] = rt as f32;
+                    point[3 * POINT + 1 + c] = rmt as f32;
+                }
+                point
             })
             .collect();
         Level { t, mu0, h, points }
@@ -244,17 +275,23 @@ struct RgbPlan {
     levels: std::ops::RangeInclusive<usize>,
 }
 
-/// How far the period may move from the built one in a program that reads
-/// it (`RgbPlan::new`): beyond the 2% a renderer moves it without a
-/// rebuild, and the parameter tests' sweeps of +-5%.
+/// How far the period and the coherence length may move from the built
+/// ones in a program that reads them (`RgbPlan::new`; the period up, the
+/// coherence length either way): beyond the 2% a renderer moves them
+/// without a rebuild, and the parameter tests' sweeps of +-5%.
 const PERIOD_REACH: f64 = 1.06;
+const COHERENCE_REACH: f64 = 1.06;
 
 impl RgbPlan {
-    /// The plan for the material; `period_reach` > 1: for every period up
-    /// to that factor of the built one (more orders can fall in the band,
-    /// and narrower peaks, as the period grows).
-    fn new(p: &PeriodicSurface, period_reach: f64) -> Option<RgbPlan> {
-        let (l, lam) = (p.coherence_um, p.period_um * period_reach);
+    /// The plan for the material; `reach` > 1: for every period up to that
+    /// factor of the built one (more orders can fall in the band, and
+    /// narrower peaks, as the period grows) and every coherence length
+    /// within that factor of the built one (a shorter one widens the
+    /// peaks' reach and their width, a longer one narrows them).
+    fn new(p: &PeriodicSurface, reach: f64) -> Option<RgbPlan> {
+        let coherence_reach = if reach > 1.0 { COHERENCE_REACH } else { 1.0 };
+        let (l, lam) = (p.coherence_um / coherence_reach, p.period_um * reach);
+        let l_max = p.coherence_um * coherence_reach;
         let slack = RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * l);
         // orders_in_band: an interval of length (|u| (nu_hi - nu_lo) + 2
         // slack) Lam, |u| <= 2.
@@ -272,9 +309,9 @@ impl RgbPlan {
         // rho: rho >= (1 / Lam - slack) / nu_hi; order 0 is never narrow
         // (its exponent at nu_lo exceeds 40 for s <= RGB_BROAD_SIGMA).
         let rho_min = ((1.0 / lam - slack) / NU_HI).max(1e-9);
-        let s_of = |rho: f64| 1.0 / (2.0 * SQRT_2 * PI * l * rho);
-        let s_max = s_of(rho_min).min(RGB_BROAD_SIGMA);
-        let s_min = s_of(2.0);
+        let s_of = |l: f64, rho: f64| 1.0 / (2.0 * SQRT_2 * PI * l * rho);
+        let s_max = s_of(l, rho_min).min(RGB_BROAD_SIGMA);
+        let s_min = s_of(l_max, 2.0);
         let lo = level_at_or_above(s_min * s_min).saturating_sub(1);
         let hi = (level_at_or_above(s_max * s_max) + 1).min(MAX_LEVELS - 1);
         Some(RgbPlan {
@@ -378,33 +415,94 @@ impl<'a> Reflectance<'a> {
 }
 
 /// The material's levels of the smoothed weight as program tables, and the
-/// pair's two levels. `cubic`: a Hermite in mu (C1: a differentiated
-/// period moves mu; 16 gathers per level), else linear (8).
+/// pair's two levels, read linearly in mu and t (8 gathers per level; the
+/// table keeps the values alone) or, along a parameter the renderer
+/// differentiates, C1: a Hermite in mu from the values and their slopes in
+/// mu where the period is (it moves mu; 16 gathers), a Hermite in t between
+/// the levels from the values and their slopes in t where the coherence
+/// length is (it moves t; 16), both from the slopes in mu and t and their
+/// mixed slopes where both are (32). Hermites in mu and t keep the reading
+/// C1 in both: each level's readings are C1 in mu, and two pairs of levels
+/// share their values and t-slopes where t crosses a level.
 struct SmoothedWeight<'a> {
-    cubic: bool,
+    mu_cubic: bool,
+    t_cubic: bool,
+    /// The fields the table keeps of each point's (`Level::points`), each
+    /// POINT values.
+    fields: Vec<usize>,
     points: Table,
     /// Per level j of the pair's pair of levels: [offset, mu0, 1/h, last].
     level: [[Value<'a>; 4]; 2],
     tau: Value<'a>,
+    dt: Value<'a>,
     inv_dt: Value<'a>,
 }
 
+/// The fields of a level's point: values, their slopes in mu, in t, and in
+/// mu and t.
+const VALUE: usize = 0;
+const SLOPE_MU: usize = 1;
+const SLOPE_T: usize = 2;
+const SLOPE_MU_T: usize = 3;
+
+/// Cubic Hermite basis at f in [0, 1] (for values p0, p1 and slopes m0, m1
+/// per unit step), and its derivative.
+fn hermite<'a>(f: Value<'a>) -> ([Value<'a>; 4], [Value<'a>; 4]) {
+    let (f2, f3) = (f * f, f * f * f);
+    (
+        [
+            f3 * 2.0 - f2 * 3.0 + 1.0,
+            f3 - f2 * 2.0 + f,
+            f2 * 3.0 - f3 * 2.0,
+            f3 - f2,
+        ],
+        [
+            f2 * 6.0 - f * 6.0,
+            f2 * 3.0 - f * 4.0 + 1.0,
+            f * 6.0 - f2 * 6.0,
+            f2 * 3.0 - f * 2.0,
+        ],
+    )
+}
+
+fn combine<'a>(basis: &[Value<'a>; 4], [p0, m0, p1, m1]: [Value<'a>; 4]) -> Value<'a> {
+    p0 * basis[0] + m0 * basis[1] + p1 * basis[2] + m1 * basis[3]
+}
+
+/// Per field of a point: the reading and its slope in mu.
+type Reading<'a> = [(Value<'a>, Value<'a>); POINT];
+
 impl<'a> SmoothedWeight<'a> {
-    fn new(b: &'a Builder, plan: &RgbPlan, t: Value<'a>, cubic: bool) -> SmoothedWeight<'a> {
+    fn new(
+        b: &'a Builder,
+        plan: &RgbPlan,
+        t: Value<'a>,
+        mu_cubic: bool,
+        t_cubic: bool,
+    ) -> SmoothedWeight<'a> {
+        let mut fields = vec![VALUE];
+        fields.extend(mu_cubic.then_some(SLOPE_MU));
+        fields.extend(t_cubic.then_some(SLOPE_T));
+        fields.extend((mu_cubic && t_cubic).then_some(SLOPE_MU_T));
+        let stride = fields.len() * POINT;
         let mut points = Vec::new();
         let mut meta = Vec::new();
         let mut ts = Vec::new();
         for k in plan.levels.clone() {
             let lv = level(k);
             meta.extend([
-                (points.len() / STRIDE) as f32,
+                (points.len() / stride) as f32,
                 lv.mu0 as f32,
                 (1.0 / lv.h) as f32,
                 (lv.points.len() - 1) as f32,
                 lv.t as f32,
             ]);
             ts.push(lv.t);
-            points.extend(lv.points.iter().flatten());
+            for p in &lv.points {
+                for &f in &fields {
+                    points.extend_from_slice(&p[f * POINT..(f + 1) * POINT]);
+                }
+            }
         }
         let meta = b.table(meta);
         // j: the last level at or below t (clamped to the range's ends).
@@ -415,69 +513,91 @@ impl<'a> SmoothedWeight<'a> {
         let get = |j: Value<'a>, f: usize| b.gather(meta, j * 5.0 + f as f64);
         let level = [j, j + 1.0].map(|j| std::array::from_fn(|f| get(j, f)));
         let (t0, t1) = (get(j, 4), get(j + 1.0, 4));
-        let inv_dt = 1.0 / (t1 - t0);
+        let dt = t1 - t0;
+        let inv_dt = 1.0 / dt;
         SmoothedWeight {
-            cubic,
+            mu_cubic,
+            t_cubic,
+            fields,
             points: b.table(points),
             level,
             tau: ((t - t0) * inv_dt).clamp(0.0, 1.0),
+            dt,
             inv_dt,
+        }
+    }
+
+    /// Field `field` at mu on a level (Hermite in mu from its slope field
+    /// `slope`, or linear), and its slope in mu.
+    fn read(
+        &self,
+        b: &'a Builder,
+        mu: Value<'a>,
+        lv: &[Value<'a>; 4],
+        field: usize,
+        slope: usize,
+    ) -> Reading<'a> {
+        let [offset, mu0, inv_h, last] = *lv;
+        let x = ((mu - mu0) * inv_h).clamp(0.0, last);
+        let i = x.floor().min(last - 1.0);
+        let f = x - i;
+        let stride = (self.fields.len() * POINT) as f64;
+        let at = (offset + i) * stride;
+        let column = |field: usize| self.fields.iter().position(|&x| x == field).unwrap() * POINT;
+        let g = |point: f64, k: usize| b.gather(self.points, at + (point * stride + k as f64));
+        let v = column(field);
+        if self.mu_cubic {
+            let (m, h) = (column(slope), 1.0 / inv_h);
+            let (basis, slope_basis) = hermite(f);
+            std::array::from_fn(|q| {
+                let parts = [
+                    g(0.0, v + q),
+                    g(0.0, m + q) * h,
+                    g(1.0, v + q),
+                    g(1.0, m + q) * h,
+                ];
+                (combine(&basis, parts), combine(&slope_basis, parts) * inv_h)
+            })
+        } else {
+            std::array::from_fn(|q| {
+                let (p0, p1) = (g(0.0, v + q), g(1.0, v + q));
+                (p0 + (p1 - p0) * f, (p1 - p0) * inv_h)
+            })
         }
     }
 
     /// W~, dW~/dmu and dW~/dt per channel at mu.
     fn at(&self, b: &'a Builder, mu: Value<'a>) -> [[Value<'a>; 3]; 3] {
-        // Per level: the interpolated point and its slope in mu.
-        let per_level = |lv: &[Value<'a>; 4]| -> ([Value<'a>; POINT], [Value<'a>; POINT]) {
-            let [offset, mu0, inv_h, last] = *lv;
-            let x = ((mu - mu0) * inv_h).clamp(0.0, last);
-            if self.cubic {
-                // Hermite between points i and i + 1 in their values and
-                // slopes (per unit mu; h = 1 / inv_h).
-                let i = x.floor().min(last - 1.0);
-                let f = x - i;
-                let at = (offset + i) * STRIDE as f64;
-                let g = |k: usize| b.gather(self.points, at + k as f64);
-                let h = 1.0 / inv_h;
-                let (f2, f3) = (f * f, f * f * f);
-                let (h00, h10) = (f3 * 2.0 - f2 * 3.0 + 1.0, f3 - f2 * 2.0 + f);
-                let (h01, h11) = (f2 * 3.0 - f3 * 2.0, f3 - f2);
-                let (d00, d10) = (f2 * 6.0 - f * 6.0, f2 * 3.0 - f * 4.0 + 1.0);
-                let (d01, d11) = (f * 6.0 - f2 * 6.0, f2 * 3.0 - f * 2.0);
-                let parts: [[Value<'a>; 4]; POINT] = std::array::from_fn(|q| {
-                    let (p0, p1) = (g(q), g(STRIDE + q));
-                    let (m0, m1) = (g(POINT + q) * h, g(STRIDE + POINT + q) * h);
-                    [p0, m0, p1, m1]
-                });
-                return (
-                    std::array::from_fn(|q| {
-                        let [p0, m0, p1, m1] = parts[q];
-                        p0 * h00 + m0 * h10 + p1 * h01 + m1 * h11
-                    }),
-                    std::array::from_fn(|q| {
-                        let [p0, m0, p1, m1] = parts[q];
-                        (p0 * d00 + m0 * d10 + p1 * d01 + m1 * d11) * inv_h
-                    }),
-                );
-            }
-            let i = x.floor().min(last - 1.0);
-            let f = x - i;
-            let at = (offset + i) * STRIDE as f64;
-            let p0: [Value<'a>; POINT] =
-                std::array::from_fn(|q| b.gather(self.points, at + q as f64));
-            let p1: [Value<'a>; POINT] =
-                std::array::from_fn(|q| b.gather(self.points, at + (STRIDE + q) as f64));
-            (
-                std::array::from_fn(|q| p0[q] + (p1[q] - p0[q]) * f),
-                std::array::from_fn(|q| (p1[q] - p0[q]) * inv_h),
-            )
-        };
-        let (v0, d0) = per_level(&self.level[0]);
-        let (v1, d1) = per_level(&self.level[1]);
-        let tau = self.tau;
-        let q: [Value<'a>; POINT] = std::array::from_fn(|c| v0[c] + (v1[c] - v0[c]) * tau);
-        let qm: [Value<'a>; POINT] = std::array::from_fn(|c| d0[c] + (d1[c] - d0[c]) * tau);
-        let qt: [Value<'a>; POINT] = std::array::from_fn(|c| (v1[c] - v0[c]) * self.inv_dt);
+        let (q, qm, qt): ([Value<'a>; POINT], [Value<'a>; POINT], [Value<'a>; POINT]) =
+            if self.t_cubic {
+                // A Hermite in t of each level's values and t-slopes.
+                let per_level = |lv| {
+                    (
+                        self.read(b, mu, lv, VALUE, SLOPE_MU),
+                        self.read(b, mu, lv, SLOPE_T, SLOPE_MU_T),
+                    )
+                };
+                let ((v0, t0), (v1, t1)) = (per_level(&self.level[0]), per_level(&self.level[1]));
+                let (basis, slope) = hermite(self.tau);
+                let dt = self.dt;
+                let across = |q: usize, d: fn((Value<'a>, Value<'a>)) -> Value<'a>| {
+                    [d(v0[q]), d(t0[q]) * dt, d(v1[q]), d(t1[q]) * dt]
+                };
+                (
+                    std::array::from_fn(|q| combine(&basis, across(q, |r| r.0))),
+                    std::array::from_fn(|q| combine(&basis, across(q, |r| r.1))),
+                    std::array::from_fn(|q| combine(&slope, across(q, |r| r.0)) * self.inv_dt),
+                )
+            } else {
+                let v0 = self.read(b, mu, &self.level[0], VALUE, SLOPE_MU);
+                let v1 = self.read(b, mu, &self.level[1], VALUE, SLOPE_MU);
+                let tau = self.tau;
+                (
+                    std::array::from_fn(|c| v0[c].0 + (v1[c].0 - v0[c].0) * tau),
+                    std::array::from_fn(|c| v0[c].1 + (v1[c].1 - v0[c].1) * tau),
+                    std::array::from_fn(|c| (v1[c].0 - v0[c].0) * self.inv_dt),
+                )
+            };
         let e = q[0].exp();
         let w = std::array::from_fn(|c| e * q[c + 1]);
         let wm = std::array::from_fn(|c| e * qm[0].fma(q[c + 1], qm[c + 1]));
@@ -559,27 +679,53 @@ impl Periodic {
         factor: Option<&dyn FactorProgram<'a>>,
     ) -> Option<[Value<'a>; 3]> {
         let p = &self.surface;
-        // The period, the profile's height (and a rect's width) as
-        // parameters, as in the spectral kernel; the coherence length stays
-        // the built one (the smoothed weight's levels, linear in t, are
-        // picked by it). A program that may see another period (not
-        // `at_built`) plans for periods up to PERIOD_REACH times the built
-        // one and reads the smoothed weight C1 in mu, which the period moves.
-        // (Where that plan would unroll more than MAX_RGB_ORDERS, the
-        // period stays a constant.)
+        // The period, the coherence length, the profile's height (and a
+        // rect's width) as parameters, as in the spectral kernel. A program
+        // that may see another period or coherence length (not `at_built`)
+        // plans for periods up to PERIOD_REACH times the built one and
+        // coherence lengths within COHERENCE_REACH of it, and reads the
+        // smoothed weight C1 in mu (which the period moves) and t (which
+        // the coherence length moves). (Where that plan would unroll more
+        // than MAX_RGB_ORDERS, both stay constants.)
         let reaching = (!b.at_built())
             .then(|| RgbPlan::new(p, PERIOD_REACH))
             .flatten();
-        let follows_period = reaching.is_some();
+        let follows = reaching.is_some();
         let plan = match reaching {
             Some(plan) => plan,
             None => RgbPlan::new(p, 1.0)?,
         };
         let powers = PowerProgram::new(b, p);
-        let lam = if follows_period {
+        let lam = if follows {
             b.param(ParamId::PeriodUm, p.period_um)
         } else {
             b.c(p.period_um)
+        };
+        // The coherence length's terms: 2 pi l, 1 / (8 pi^2 l^2) (t = s^2
+        // per 1 / rho^2), 4 pi l^2, and 2 pi l times a number (constants
+        // where it stays).
+        let l = follows.then(|| b.param(ParamId::CoherenceUm, p.coherence_um));
+        let (two_pi_l, t_per_inv_rho2, four_pi_l2) = match l {
+            Some(l) => {
+                let l2 = l * l;
+                (
+                    l * (2.0 * PI),
+                    1.0 / (l2 * (8.0 * PI * PI)),
+                    l2 * (4.0 * PI),
+                )
+            }
+            None => {
+                let l = p.coherence_um;
+                (
+                    b.c(2.0 * PI * l),
+                    b.c(1.0 / (8.0 * PI * PI * l * l)),
+                    b.c(4.0 * PI * l * l),
+                )
+            }
+        };
+        let two_pi_l_times = |x: f64| match l {
+            Some(_) => two_pi_l * x,
+            None => b.c(2.0 * PI * p.coherence_um * x),
         };
         let inv_lam = 1.0 / lam;
         let profile = p.profile_program(b, lam);
@@ -594,8 +740,6 @@ impl Periodic {
             ProfileProgram::Scaled(_) => None,
         };
         let (u, v, w) = (pair.u, pair.v, pair.w);
-        let l = p.coherence_um;
-        let two_pi_l = 2.0 * PI * l;
         let refl = Reflectance::new(b, shading.fresnel, pair.cos_half);
         // F^2 (1 when flat: applied at the end) times the factor, at a
         // wavenumber and at a node of the broad rule.
@@ -615,14 +759,14 @@ impl Periodic {
         let rho2 = positive.select(rho2, 1.0);
         let inv_rho2 = 1.0 / rho2;
         // t = s^2, s = 1 / (2 sqrt 2 pi l rho).
-        let t = inv_rho2 * (1.0 / (8.0 * PI * PI * l * l));
+        let t = inv_rho2 * t_per_inv_rho2;
         let s = t.sqrt();
-        let c_const = (4.0 * PI * l * l) / (w * w);
+        let c_const = four_pi_l2 / (w * w);
         let narrow = positive & s.le(RGB_BROAD_SIGMA);
         let ok = w.lt(0.0)
             & u.finite()
             & v.finite()
-            & (v * (two_pi_l * NU_LO)).sq().le(RGB_TAIL_EXPONENT);
+            & (v * two_pi_l_times(NU_LO)).sq().le(RGB_TAIL_EXPONENT);
         let peak = |n: Value<'a>| -> OrderPeak<'a> {
             let a_n = (n * v * inv_lam * two_pi_l).sq() * inv_rho2;
             let mu = u * n * inv_rho2 * inv_lam;
@@ -635,12 +779,22 @@ impl Periodic {
         };
 
         // Narrow peaks.
-        let slack = RGB_TAIL_EXPONENT.sqrt() / two_pi_l;
+        let slack = match l {
+            Some(_) => RGB_TAIL_EXPONENT.sqrt() / two_pi_l,
+            None => b.c(RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * p.coherence_um)),
+        };
         let (xa, xb) = (u * NU_LO, u * NU_HI);
         let (x0, x1) = (xa.min(xb), xa.max(xb));
         let n_first = -((slack - x0) * lam).floor(); // ceil((x0 - slack) Lam)
         let n_last = ((x1 + slack) * lam).floor();
-        let table = SmoothedWeight::new(b, &plan, t, follows_period);
+        // C1 along the parameters a renderer differentiates.
+        let table = SmoothedWeight::new(
+            b,
+            &plan,
+            t,
+            follows && b.differentiated(ParamId::PeriodUm),
+            follows && b.differentiated(ParamId::CoherenceUm),
+        );
         let norm = s * (2.0 * PI).sqrt();
         let mut narrow_sum = [b.c(0.0); 3];
         for i in 0..plan.narrow_orders {
@@ -694,7 +848,7 @@ impl Periodic {
                 ProfileProgram::Rect { height, .. } => (None, Some(rect_s2(beta, height))),
                 ProfileProgram::Scaled(_) => (Some(powers.at(b, profile.scaled_beta(beta))), None),
             };
-            let ev = (v * (two_pi_l * nu)).sq();
+            let ev = (v * two_pi_l_times(nu)).sq();
             let mut sum = b.c(0.0);
             for &(n, take, rect) in &orders {
                 let d = (u * nu - inv_lam * n) * two_pi_l;
@@ -717,5 +871,53 @@ impl Periodic {
             let out = narrow.select(narrow_sum[ch], broad_sum[ch]) * flat;
             (ok & out.finite()).select(out, 0.0)
         }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The smoothed weight's derivatives in mu (exact, from the weight's
+    /// cells, nodes and ends) against central differences (step s / 200),
+    /// and its slope in t (the heat equation, dW~/dt = W~'' / 2) against a
+    /// difference in t, over the band and at widths from the finest level's
+    /// to the broad peaks'.
+    #[test]
+    fn smoothed_weight_derivatives_match_differences() {
+        let mut worst = [0.0f64; 4];
+        for s in [3e-4, 1e-3, 4e-3, 1.5e-2] {
+            for j in 0..40 {
+                let mu = NU_LO + (NU_HI - NU_LO) * (j as f64 + 0.37) / 40.0;
+                let d = smoothed_weight_derivatives(mu, s);
+                let h = 0.005 * s;
+                let (up, down) = (
+                    smoothed_weight_derivatives(mu + h, s),
+                    smoothed_weight_derivatives(mu - h, s),
+                );
+                let t = s * s;
+                let (tu, td) = (
+                    smoothed_weight_derivatives(mu, (t * 1.001).sqrt()),
+                    smoothed_weight_derivatives(mu, (t * 0.999).sqrt()),
+                );
+                for c in 0..4 {
+                    // Each against the scale of what it differentiates.
+                    let scale = |k: usize| d[k][c].abs().max(1e-3 * d[k][3].abs()).max(1e-30);
+                    for k in 0..3 {
+                        let fd = (up[k][c] - down[k][c]) / (2.0 * h);
+                        let e = (fd - d[k + 1][c]).abs() / (scale(k + 1) + h * scale(k) / s);
+                        worst[k] = worst[k].max(e);
+                    }
+                    let ft = (tu[0][c] - td[0][c]) / (0.002 * t);
+                    let e = (ft - 0.5 * d[2][c]).abs() / (0.5 * scale(2) + scale(0) / t * 1e-4);
+                    worst[3] = worst[3].max(e);
+                }
+            }
+        }
+        println!(
+            "worst relative errors: d/dmu {:.1e} {:.1e} {:.1e}, d/dt {:.1e}",
+            worst[0], worst[1], worst[2], worst[3]
+        );
+        assert!(worst.iter().all(|&e| e < 1e-3), "{worst:?}");
     }
 }

@@ -299,10 +299,11 @@ fn rgb_peak_errors_of(
     (e32, e64, checked)
 }
 
-/// The RGB eval for the built parameters (`program_at_built`: the period a
-/// constant, the smoothed weight linear in mu, the orders planned for the
-/// built period; 16 gathers per narrow order fewer than the plain
-/// program's Catmull-Rom) holds the native path as the plain one does.
+/// The RGB eval for the built parameters (`program_at_built`: the period
+/// and the coherence length constants, the orders and levels planned for
+/// them; the plain program plans for both to move, and reads the smoothed
+/// weight C1 along those that carry gradients) holds the native path as
+/// the plain one does, and is no larger.
 #[test]
 fn rgb_at_built_on_order_peaks() {
     let gathers = |p: &crate::program::Program| {
@@ -324,7 +325,10 @@ fn rgb_at_built_on_order_peaks() {
             plain.code.len(),
             gathers(&plain)
         );
-        assert!(gathers(&lean) < gathers(&plain), "{name}");
+        assert!(
+            gathers(&lean) <= gathers(&plain) && lean.code.len() < plain.code.len(),
+            "{name}"
+        );
         assert!(e32 < RGB_TOLERANCE, "{name}: {e32}");
     }
 }
