@@ -145,10 +145,12 @@ fn adaptive(f: &dyn Fn(f64, f64) -> f64, r: Rect, whole: f64, depth: u32) -> f64
     let parts = quarters(r);
     let fine: f64 = parts.iter().map(|&p| gauss_legendre(f, p)).sum();
     let area = (r.hi[0] - r.lo[0]) * (r.hi[1] - r.lo[1]);
-    // 2e-3 of a cell's integral: far below the counts' own error (a cell
-    // expecting e samples has sd sqrt(e), 1/sqrt(e) >= 3% below e = 1000),
-    // and 3-4x fewer pdf evaluations than 3e-4 on a grating's RGB ridges.
-    if depth == 0 || (whole - fine).abs() <= 1e-5 * area + 2e-3 * fine.abs() {
+    // 5e-3 of a cell's integral: far below the counts' own error (a cell
+    // expecting e samples has sd sqrt(e), 1/sqrt(e) >= 3% below e = 1000).
+    // On a grating's RGB ridges it takes 2.5x fewer pdf evaluations than
+    // 2e-3 (which took 3-4x fewer than 3e-4), and the compact disc's chi2
+    // statistics stayed the same to 0.1 (2026-12-03).
+    if depth == 0 || (whole - fine).abs() <= 1e-5 * area + 5e-3 * fine.abs() {
         return fine;
     }
     parts
@@ -204,6 +206,12 @@ pub trait Sampler {
     fn sample(&self, rnd: [f64; 3]) -> SampleResult;
     fn pdf(&self, wo: DVec3) -> f64;
     fn coherent_probability(&self) -> f64;
+    /// Whether `sample` gives, by construction, `pdf` at its direction (a
+    /// sampler that computes it so): the check that the two agree is then
+    /// skipped, not run on the same numbers twice.
+    fn sample_pdf_is_pdf(&self) -> bool {
+        false
+    }
 }
 
 impl Sampler for Strategy<'_> {
@@ -219,7 +227,8 @@ impl Sampler for Strategy<'_> {
 }
 
 /// Goodness of fit of `sampler.sample` against `sampler.pdf`; also checks
-/// every sample (unit wo above the horizon, finite pdf equal to pdf(wo)).
+/// every sample (unit wo above the horizon, finite pdf equal to pdf(wo)
+/// unless the sampler computes it so).
 pub fn chi2_fit(sampler: &dyn Sampler, seed: u64, n: usize) -> Fit {
     chi2_fit_against(sampler, sampler, seed, n)
 }
@@ -242,7 +251,7 @@ pub fn chi2_fit_against(
                 s.wo.length()
             );
             assert!(s.wo.z > 0.0);
-            if !s.coherent {
+            if !s.coherent && !sampler.sample_pdf_is_pdf() {
                 let p = sampler.pdf(s.wo);
                 assert!((p - s.pdf).abs() <= 1e-12 * p, "{p} vs {}", s.pdf);
             }

@@ -244,4 +244,9 @@ impl Sampler for ProgramSampler {
         inputs.extend(self.lambda_nm);
         *self.run(&self.coherent, &inputs).last().unwrap()
     }
+
+    /// `sample` runs the pdf program at its direction.
+    fn sample_pdf_is_pdf(&self) -> bool {
+        true
+    }
 }
