@@ -8,7 +8,7 @@
 //! differentiates its parameters runs (rows only where they differ).
 //! Usage: cargo run --release -p stam-core --example program_sizes
 use stam::material::program::ProgramKind;
-use stam::program::Op;
+use stam::program::{Op, Program};
 use stam::Brdf;
 
 fn main() {
@@ -29,44 +29,33 @@ fn main() {
     ];
     println!("| material | energy | program | instructions | gathers | table values |");
     println!("|---|---|---|---|---|---|");
+    let gathers = |p: &Program| p.code.iter().filter(|i| i.op == Op::Gather).count();
     for (name, body) in materials {
         for energy in ["conserving", "stam"] {
             let json = format!(r#"{{{body},"energy":"{energy}"}}"#);
             let brdf = Brdf::from_json(&json).expect("material");
+            let json = format!(r#"{{{body},"energy":"{energy}","gradients":true}}"#);
+            let differentiated = Brdf::from_json(&json).expect("material");
             for kind in ProgramKind::ALL {
                 let Some(p) = brdf.program(kind) else {
                     continue;
                 };
-                let gathers = |p: &stam::program::Program| {
-                    p.code.iter().filter(|i| i.op == Op::Gather).count()
+                let row = |label: &str, p: &Program| {
+                    println!(
+                        "| {name} | {energy} | {kind:?}{label} | {} | {} | {} |",
+                        p.code.len(),
+                        gathers(p),
+                        p.table_len()
+                    )
                 };
-                println!(
-                    "| {name} | {energy} | {kind:?} | {} | {} | {} |",
-                    p.code.len(),
-                    gathers(&p),
-                    p.table_len()
-                );
-                let differentiated = format!(r#"{{{body},"energy":"{energy}","gradients":true}}"#);
-                let differentiated = Brdf::from_json(&differentiated).expect("material");
+                row("", &p);
                 if let Some(g) = differentiated.program(kind) {
                     if g.encode() != p.encode() {
-                        println!(
-                            "| {name} | {energy} | {kind:?} (gradients) | {} | {} | {} |",
-                            g.code.len(),
-                            gathers(&g),
-                            g.table_len()
-                        );
+                        row(" (gradients)", &g);
                     }
                 }
                 if let Some(lean) = brdf.program_at_built(kind) {
-                    if lean.code.len() != p.code.len() {
-                        println!(
-                            "| {name} | {energy} | {kind:?} (built) | {} | {} | {} |",
-                            lean.code.len(),
-                            gathers(&lean),
-                            lean.table_len()
-                        );
-                    }
+                    row(" (built)", &lean);
                 }
             }
         }

@@ -61,8 +61,8 @@ pub struct Brdf {
 struct Energy {
     surface: SurfaceParams,
     table: OnceLock<Arc<EnergyTable>>,
-    /// The parameters asked for, and the derivatives once built.
-    derivatives: (Vec<ParamId>, OnceLock<Vec<TableDerivative>>),
+    /// The derivatives along the material's `gradients`, once built.
+    derivatives: OnceLock<Vec<TableDerivative>>,
 }
 
 /// Energy tables built in this process, by their surface parameters (the
@@ -130,7 +130,7 @@ impl Brdf {
         let energy = (params.energy == EnergyMode::Conserving).then(|| Energy {
             surface: params.surface.clone(),
             table: OnceLock::new(),
-            derivatives: (params.gradients.clone(), OnceLock::new()),
+            derivatives: OnceLock::new(),
         });
         Ok(Brdf {
             surface,
@@ -159,18 +159,17 @@ impl Brdf {
         let Some(energy) = self.energy.as_ref() else {
             return &[];
         };
-        let (asked, derivatives) = &energy.derivatives;
-        if asked.is_empty() {
+        if self.gradients.is_empty() {
             return &[];
         }
-        derivatives.get_or_init(|| {
+        energy.derivatives.get_or_init(|| {
             let centre = self.energy_table().expect("a conserving material");
             let at = |id, value| energy_table_of(&energy.surface.with_param(id, value));
             energy
                 .surface
                 .table_params()
                 .into_iter()
-                .filter(|(id, _)| asked.contains(id))
+                .filter(|(id, _)| self.gradients.contains(id))
                 .filter_map(|(id, p0)| {
                     let step = energy::DERIVATIVE_STEP.exp();
                     let (below, above) = (at(id, p0 / step), at(id, p0 * step));

@@ -472,6 +472,14 @@ fn combine<'a>(basis: &[Value<'a>; 4], [p0, m0, p1, m1]: [Value<'a>; 4]) -> Valu
 /// Per field of a point: the reading and its slope in mu.
 type Reading<'a> = [(Value<'a>, Value<'a>); POINT];
 
+/// A level's cell around mu (`SmoothedWeight::cell`).
+#[derive(Clone, Copy)]
+struct Cell<'a> {
+    at: Value<'a>,
+    f: Value<'a>,
+    inv_h: Value<'a>,
+}
+
 impl<'a> SmoothedWeight<'a> {
     fn new(
         b: &'a Builder,
@@ -527,22 +535,24 @@ impl<'a> SmoothedWeight<'a> {
         }
     }
 
-    /// Field `field` at mu on a level (Hermite in mu from its slope field
-    /// `slope`, or linear), and its slope in mu.
-    fn read(
-        &self,
-        b: &'a Builder,
-        mu: Value<'a>,
-        lv: &[Value<'a>; 4],
-        field: usize,
-        slope: usize,
-    ) -> Reading<'a> {
+    /// The cell of a level around mu: its first point's place in the table,
+    /// the fraction of the step beyond it, and 1 / the step.
+    fn cell(&self, mu: Value<'a>, lv: &[Value<'a>; 4]) -> Cell<'a> {
         let [offset, mu0, inv_h, last] = *lv;
         let x = ((mu - mu0) * inv_h).clamp(0.0, last);
         let i = x.floor().min(last - 1.0);
-        let f = x - i;
+        Cell {
+            at: (offset + i) * (self.fields.len() * POINT) as f64,
+            f: x - i,
+            inv_h,
+        }
+    }
+
+    /// Field `field` in a level's cell (Hermite in mu from its slope field
+    /// `slope`, or linear), and its slope in mu.
+    fn read(&self, b: &'a Builder, cell: &Cell<'a>, field: usize, slope: usize) -> Reading<'a> {
+        let Cell { at, f, inv_h } = *cell;
         let stride = (self.fields.len() * POINT) as f64;
-        let at = (offset + i) * stride;
         let column = |field: usize| self.fields.iter().position(|&x| x == field).unwrap() * POINT;
         let g = |point: f64, k: usize| b.gather(self.points, at + (point * stride + k as f64));
         let v = column(field);
@@ -572,9 +582,10 @@ impl<'a> SmoothedWeight<'a> {
             if self.t_cubic {
                 // A Hermite in t of each level's values and t-slopes.
                 let per_level = |lv| {
+                    let cell = self.cell(mu, lv);
                     (
-                        self.read(b, mu, lv, VALUE, SLOPE_MU),
-                        self.read(b, mu, lv, SLOPE_T, SLOPE_MU_T),
+                        self.read(b, &cell, VALUE, SLOPE_MU),
+                        self.read(b, &cell, SLOPE_T, SLOPE_MU_T),
                     )
                 };
                 let ((v0, t0), (v1, t1)) = (per_level(&self.level[0]), per_level(&self.level[1]));
@@ -589,8 +600,8 @@ impl<'a> SmoothedWeight<'a> {
                     std::array::from_fn(|q| combine(&slope, across(q, |r| r.0)) * self.inv_dt),
                 )
             } else {
-                let v0 = self.read(b, mu, &self.level[0], VALUE, SLOPE_MU);
-                let v1 = self.read(b, mu, &self.level[1], VALUE, SLOPE_MU);
+                let v0 = self.read(b, &self.cell(mu, &self.level[0]), VALUE, SLOPE_MU);
+                let v1 = self.read(b, &self.cell(mu, &self.level[1]), VALUE, SLOPE_MU);
                 let tau = self.tau;
                 (
                     std::array::from_fn(|c| v0[c].0 + (v1[c].0 - v0[c].0) * tau),
