@@ -8,19 +8,25 @@
  * right kind, every table inside the array, as the core's own `decode`), and
  * executes it with Dr.Jit operations, one per instruction (Program::run), so
  * that Dr.Jit traces it like any other code: symbolic loops and calls,
- * dr.freeze, LLVM and CUDA alike. No physics: which operations, in which
- * order, on which tables, is the core's.
+ * dr.freeze, LLVM and CUDA alike. A region of the program (If .. EndIf)
+ * runs inside dr::if_stmt, so that a packet or warp none of whose lanes
+ * needs it skips it. No physics: which operations, in which order, on which
+ * tables, is the core's.
  */
 #pragma once
 
 #include <drjit/array.h>
+#include <drjit/if_stmt.h>
 #include <drjit/math.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <unordered_map>
 #include <vector>
 
@@ -34,7 +40,7 @@ namespace dr = ::drjit;
 
 /// Version of the array layout and of the operation set (the core's
 /// program::FORMAT).
-constexpr uint32_t Format = 3;
+constexpr uint32_t Format = 4;
 /// Values before the outputs (program::HEADER_LEN).
 constexpr size_t HeaderLen = 8;
 
@@ -43,17 +49,19 @@ enum class Op : uint32_t {
     Input = 0, Const = 1, Add = 2, Sub = 3, Mul = 4, Div = 5, Min = 6, Max = 7,
     Fma = 8, Neg = 9, Abs = 10, Sqrt = 11, Exp = 12, Log = 13, Sin = 14, Cos = 15,
     Atan2 = 16, Floor = 17, Lt = 18, Le = 19, Gt = 20, Ge = 21, Eq = 22, Finite = 23,
-    And = 24, Or = 25, Not = 26, Select = 27, Gather = 28, Param = 29
+    And = 24, Or = 25, Not = 26, Select = 27, Gather = 28, Param = 29, If = 30,
+    EndIf = 31
 };
-constexpr uint32_t OpCount = 30;
+constexpr uint32_t OpCount = 32;
 
-/// The registers an operation reads (Gather reads only its index, b).
+/// The registers an operation reads (Gather reads only its index, b; If its
+/// mask, a; EndIf names its If in a, which is no read).
 inline size_t arity(Op op) {
     switch (op) {
-        case Op::Input: case Op::Const: case Op::Param: return 0;
+        case Op::Input: case Op::Const: case Op::Param: case Op::EndIf: return 0;
         case Op::Neg: case Op::Abs: case Op::Sqrt: case Op::Exp: case Op::Log:
         case Op::Sin: case Op::Cos: case Op::Floor: case Op::Finite: case Op::Not:
-        case Op::Gather:
+        case Op::Gather: case Op::If:
             return 1;
         case Op::Fma: case Op::Select: return 3;
         default: return 2;
@@ -73,7 +81,7 @@ inline bool gives_mask(Op op) {
 /// Whether operand k of op is a mask (else a float).
 inline bool wants_mask(Op op, size_t k) {
     switch (op) {
-        case Op::And: case Op::Or: case Op::Not: return true;
+        case Op::And: case Op::Or: case Op::Not: case Op::If: return true;
         case Op::Select: return k == 0;
         default: return false;
     }
@@ -82,7 +90,8 @@ inline bool wants_mask(Op op, size_t k) {
 struct Instr {
     Op op;
     uint32_t a, b, c; // registers; Input: the input; Const: a's bits; Gather: table,
-                      // index; Param: the slot in the parameter section
+                      // index; Param: the slot in the parameter section; If: mask,
+                      // and (set by decode_program) its region's number
     float value;      // Const
     /// The registers it reads: a, b, c by arity; Gather: b.
     uint32_t operand(size_t k) const {
@@ -90,6 +99,14 @@ struct Instr {
             return b;
         return k == 0 ? a : (k == 1 ? b : c);
     }
+};
+
+/// A region (If .. EndIf): where it ends, the registers from outside that
+/// it reads (live-ins) and those it defines that are read after it
+/// (live-outs), floats and masks apart.
+struct Region {
+    uint32_t end = 0;
+    std::vector<uint32_t> in_f, in_m, out_f, out_m;
 };
 
 /// A decoded, checked program: its code, outputs and where its tables lie
@@ -106,7 +123,10 @@ struct Code {
     /// After instruction i, the registers whose last reader it was (so that
     /// the executor drops them: Dr.Jit then holds only the live ones).
     std::vector<std::vector<uint32_t>> last_use;
+    std::vector<Region> regions;
     size_t gathers = 0;
+    /// Where each table starts in the buffer the caller loads (Program).
+    std::vector<uint32_t> table_base;
 };
 
 /// Thrown for an array that is not a well-formed program.
@@ -162,8 +182,13 @@ inline Code decode_program(const float *v, size_t len) {
         p.param_id.push_back(id);
         p.param_value.push_back(v[par_at + 2 * k + 1]);
     }
-    std::vector<bool> is_mask;
+    // Per register: 0 float, 1 mask, 2 a region's marker (read by nothing).
+    std::vector<uint8_t> kind;
     std::vector<size_t> last(n_code, 0);
+    // Per instruction: the innermost region it lies in (its number + 1; 0:
+    // none); per region: its If and the region it lies in (same coding).
+    std::vector<uint32_t> inside(n_code, 0), region_if, parent;
+    std::vector<uint32_t> open;
     p.code.reserve(n_code);
     for (size_t i = 0; i < n_code; ++i) {
         size_t at = code_at + 4 * i;
@@ -191,25 +216,74 @@ inline Code decode_program(const float *v, size_t len) {
         if (ins.op == Op::Gather && ins.a >= n_tab)
             fail("instruction " + std::to_string(i) + " reads table " +
                  std::to_string(ins.a) + " of " + std::to_string(n_tab));
+        if ((ins.op == Op::Input || ins.op == Op::Const || ins.op == Op::Param) && !open.empty())
+            fail("instruction " + std::to_string(i) + " (an input, constant or parameter) "
+                 "lies inside a region");
         for (size_t k = 0; k < arity(ins.op); ++k) {
             uint32_t r = ins.operand(k);
-            if (r >= i || is_mask[r] != wants_mask(ins.op, k))
+            if (r >= i || kind[r] != (wants_mask(ins.op, k) ? 1 : 0))
                 fail("instruction " + std::to_string(i) + " reads register " +
                      std::to_string(r) + (r >= i ? ", not defined before it"
                                                  : ", of the wrong kind (mask or float)"));
-            last[r] = i;
+        }
+        inside[i] = open.empty() ? 0 : open.back() + 1;
+        if (ins.op == Op::If) {
+            ins.b = (uint32_t) region_if.size();
+            open.push_back(ins.b);
+            region_if.push_back((uint32_t) i);
+            parent.push_back(inside[i]);
+            p.regions.emplace_back();
+        } else if (ins.op == Op::EndIf) {
+            if (open.empty() || region_if[open.back()] != ins.a)
+                fail("instruction " + std::to_string(i) + " ends a region that is not the "
+                     "innermost open one");
+            p.regions[open.back()].end = (uint32_t) i;
+            open.pop_back();
+            inside[i] = open.empty() ? 0 : open.back() + 1;
         }
         p.gathers += ins.op == Op::Gather;
-        is_mask.push_back(gives_mask(ins.op));
+        kind.push_back(ins.op == Op::If || ins.op == Op::EndIf ? 2 : gives_mask(ins.op));
         p.code.push_back(ins);
     }
+    if (!open.empty())
+        fail("a region is not closed");
+    // Whether region g (number + 1; 0: the whole program) holds instruction
+    // k; a read at k of register r: each region holding k but not r reads r
+    // from outside (a live-in), each holding r but not k has r read after
+    // it (a live-out); its last use, for the executor, is the end of the
+    // outermost region holding k but not r.
+    auto holds = [&](uint32_t g, size_t k) {
+        return g == 0 || (region_if[g - 1] < k && k <= p.regions[g - 1].end);
+    };
+    auto note_read = [&](uint32_t r, size_t k) {
+        size_t at = k;
+        for (uint32_t g = k < n_code ? inside[k] : 0; !holds(g, r); g = parent[g - 1]) {
+            Region &reg = p.regions[g - 1];
+            (kind[r] ? reg.in_m : reg.in_f).push_back(r);
+            at = reg.end;
+        }
+        for (uint32_t g = inside[r]; !holds(g, k); g = parent[g - 1]) {
+            Region &reg = p.regions[g - 1];
+            (kind[r] ? reg.out_m : reg.out_f).push_back(r);
+        }
+        last[r] = std::max(last[r], at);
+    };
+    for (size_t i = 0; i < n_code; ++i)
+        for (size_t k = 0; k < arity(p.code[i].op); ++k)
+            note_read(p.code[i].operand(k), i);
     for (size_t k = 0; k < n_out; ++k) {
         uint32_t r = int_at(HeaderLen + k, "an output register");
-        if (r >= n_code || is_mask[r])
+        if (r >= n_code || kind[r] != 0)
             fail("output " + std::to_string(k) + " is not a float register");
         p.outputs.push_back(r);
+        note_read(r, n_code);
         last[r] = n_code; // kept to the end
     }
+    for (Region &reg : p.regions)
+        for (auto *regs : { &reg.in_f, &reg.in_m, &reg.out_f, &reg.out_m }) {
+            std::sort(regs->begin(), regs->end());
+            regs->erase(std::unique(regs->begin(), regs->end()), regs->end());
+        }
     p.last_use.assign(n_code, {});
     for (size_t r = 0; r < n_code; ++r)
         if (last[r] < n_code && last[r] > r)
@@ -293,22 +367,23 @@ public:
 
     /// Decode `v` (throws Malformed); its tables go to `storage` (host
     /// values, loaded into the device buffer by the caller).
-    Program(const std::vector<float> &v, TableStorage &storage)
-        : m_code(decode_program(v.data(), v.size())) {
-        for (size_t t = 0; t < m_code.table_offset.size(); ++t)
-            m_table_base.push_back(
-                storage.add(v.data() + m_code.table_offset[t], m_code.table_len[t]));
+    Program(const std::vector<float> &v, TableStorage &storage) {
+        Code code = decode_program(v.data(), v.size());
+        for (size_t t = 0; t < code.table_offset.size(); ++t)
+            code.table_base.push_back(
+                storage.add(v.data() + code.table_offset[t], code.table_len[t]));
+        m_code = std::make_shared<const Code>(std::move(code));
     }
 
-    bool valid() const { return !m_code.code.empty() || !m_code.outputs.empty(); }
-    size_t n_inputs() const { return m_code.n_inputs; }
-    size_t n_outputs() const { return m_code.outputs.size(); }
-    size_t n_instructions() const { return m_code.code.size(); }
-    size_t n_gathers() const { return m_code.gathers; }
+    bool valid() const { return !c().code.empty() || !c().outputs.empty(); }
+    size_t n_inputs() const { return c().n_inputs; }
+    size_t n_outputs() const { return c().outputs.size(); }
+    size_t n_instructions() const { return c().code.size(); }
+    size_t n_gathers() const { return c().gathers; }
     /// The ids (STAM_PARAM_*) of the parameters the program reads, and the
     /// values it was built with.
-    const std::vector<uint32_t> &param_ids() const { return m_code.param_id; }
-    const std::vector<float> &param_values() const { return m_code.param_value; }
+    const std::vector<uint32_t> &param_ids() const { return c().param_id; }
+    const std::vector<float> &param_values() const { return c().param_value; }
 
     /// The outputs for `inputs` (n_inputs arrays), one Dr.Jit operation per
     /// instruction; `tables` is the buffer the constructor's storage was
@@ -321,15 +396,104 @@ public:
     template <typename Storage>
     std::vector<Float> run(const std::vector<Float> &inputs, const Storage &tables,
                            const ParamInputs<Float> &params = {}) const {
-        if (inputs.size() != m_code.n_inputs)
+        const Code &code = c();
+        if (inputs.size() != code.n_inputs)
             throw std::runtime_error("program: " + std::to_string(inputs.size()) +
                                      " inputs given, it takes " +
-                                     std::to_string(m_code.n_inputs));
-        const size_t n = m_code.code.size();
+                                     std::to_string(code.n_inputs));
+        const size_t n = code.code.size();
         std::vector<Float> f(n);
         std::vector<Mask> m(n);
-        for (size_t i = 0; i < n; ++i) {
-            const Instr &in = m_code.code[i];
+        if (n)
+            run_range(m_code, 0, n, f, m, inputs, tables, params);
+        std::vector<Float> out;
+        out.reserve(code.outputs.size());
+        for (uint32_t r : code.outputs)
+            out.push_back(f[r]);
+        return out;
+    }
+
+private:
+    /// The live-ins or live-outs of a region, as the state of dr::if_stmt
+    /// (traversed by Dr.Jit: its floats, then its masks).
+    struct RegionState {
+        std::vector<Float> f;
+        std::vector<Mask> m;
+        void traverse_1_cb_ro(void *p, void (*fn)(void *, uint64_t, const char *,
+                                                   const char *)) const {
+            for (const Float &x : f)
+                dr::traverse_1_fn_ro(x, p, fn);
+            for (const Mask &x : m)
+                dr::traverse_1_fn_ro(x, p, fn);
+        }
+        void traverse_1_cb_rw(void *p, uint64_t (*fn)(void *, uint64_t, const char *,
+                                                       const char *)) {
+            for (Float &x : f)
+                dr::traverse_1_fn_rw(x, p, fn);
+            for (Mask &x : m)
+                dr::traverse_1_fn_rw(x, p, fn);
+        }
+    };
+
+    /// Instructions lo .. hi - 1 of `code` into the registers f and m; a
+    /// region runs inside dr::if_stmt on its live-ins, returning its
+    /// live-outs, 0 (false) on the lanes its mask excludes. Its body owns
+    /// what it uses (the code, the tables, the parameters, a register file
+    /// of its own): Dr.Jit may call it again after this returns (to
+    /// differentiate it in reverse mode) and, in evaluated mode, hands it
+    /// the live-ins of the mask's lanes only.
+    template <typename Storage>
+    static void run_range(const std::shared_ptr<const Code> &code_ptr, size_t lo, size_t hi,
+                          std::vector<Float> &f, std::vector<Mask> &m,
+                          const std::vector<Float> &inputs, const Storage &tables,
+                          const ParamInputs<Float> &params) {
+        const Code &code = *code_ptr;
+        for (size_t i = lo; i < hi; ++i) {
+            const Instr &in = code.code[i];
+            if (in.op == Op::If) {
+                const Region &reg = code.regions[in.b];
+                RegionState live_in;
+                for (uint32_t r : reg.in_f)
+                    live_in.f.push_back(f[r]);
+                for (uint32_t r : reg.in_m)
+                    live_in.m.push_back(m[r]);
+                auto body = [code_ptr, region = in.b, start = i, tables,
+                             params](const RegionState &x) {
+                    const Code &cd = *code_ptr;
+                    const Region &rg = cd.regions[region];
+                    std::vector<Float> rf(cd.code.size());
+                    std::vector<Mask> rm(cd.code.size());
+                    for (size_t k = 0; k < rg.in_f.size(); ++k)
+                        rf[rg.in_f[k]] = x.f[k];
+                    for (size_t k = 0; k < rg.in_m.size(); ++k)
+                        rm[rg.in_m[k]] = x.m[k];
+                    run_range(code_ptr, start + 1, rg.end, rf, rm, {}, tables, params);
+                    RegionState out;
+                    for (uint32_t r : rg.out_f)
+                        out.f.push_back(rf[r]);
+                    for (uint32_t r : rg.out_m)
+                        out.m.push_back(rm[r]);
+                    return out;
+                };
+                auto skipped = [n_f = reg.out_f.size(), n_m = reg.out_m.size()](
+                                   const RegionState &) {
+                    RegionState out;
+                    out.f.assign(n_f, Float(0.f));
+                    out.m.assign(n_m, Mask(false));
+                    return out;
+                };
+                // By value: Dr.Jit keeps the functions (as it deduces
+                // their types) for the reverse pass.
+                RegionState res = dr::if_stmt(std::make_tuple(std::move(live_in)), m[in.a],
+                                              std::move(body), std::move(skipped));
+                for (size_t k = 0; k < reg.out_f.size(); ++k)
+                    f[reg.out_f[k]] = res.f[k];
+                for (size_t k = 0; k < reg.out_m.size(); ++k)
+                    m[reg.out_m[k]] = res.m[k];
+                i = reg.end;
+                drop(code, i, f, m);
+                continue;
+            }
             const Float &fa = f[in.a], &fb = f[in.b], &fc = f[in.c];
             switch (in.op) {
                 case Op::Input: f[i] = inputs[in.a]; break;
@@ -360,48 +524,55 @@ public:
                 case Op::Or: m[i] = m[in.a] || m[in.b]; break;
                 case Op::Not: m[i] = !m[in.a]; break;
                 case Op::Select: f[i] = dr::select(m[in.a], fb, fc); break;
-                case Op::Gather: f[i] = gather(in.a, fb, tables); break;
+                case Op::Gather: f[i] = gather(code, in.a, fb, tables); break;
                 case Op::Param: {
-                    uint32_t id = m_code.param_id[in.a];
+                    uint32_t id = code.param_id[in.a];
                     if (dr::width(params.per_point[id]) != 0)
                         f[i] = params.per_point[id];
                     else if (dr::width(params.array) == STAM_PARAMS)
                         f[i] = dr::gather<Float>(params.array, UInt32(id));
                     else
-                        f[i] = Float(m_code.param_value[in.a]);
+                        f[i] = Float(code.param_value[in.a]);
                     break;
                 }
+                case Op::If: case Op::EndIf: break; // If: above; EndIf: a region's end
             }
-            for (uint32_t r : m_code.last_use[i]) {
-                f[r] = Float();
-                m[r] = Mask();
-            }
+            drop(code, i, f, m);
         }
-        std::vector<Float> out;
-        out.reserve(m_code.outputs.size());
-        for (uint32_t r : m_code.outputs)
-            out.push_back(f[r]);
-        return out;
     }
 
-private:
+    /// Drops the registers whose last reader was instruction i (so that
+    /// Dr.Jit holds only the live ones).
+    static void drop(const Code &code, size_t i, std::vector<Float> &f, std::vector<Mask> &m) {
+        for (uint32_t r : code.last_use[i]) {
+            f[r] = Float();
+            m[r] = Mask();
+        }
+    }
+
     /// Table t at the index x: NaN to 0, clamped into [0, len - 1],
     /// truncated (the core's Op::Gather), so that no lane reads outside it.
     template <typename Storage>
-    Float gather(uint32_t t, const Float &x, const Storage &tables) const {
-        size_t len = m_code.table_len[t];
+    static Float gather(const Code &code, uint32_t t, const Float &x, const Storage &tables) {
+        size_t len = code.table_len[t];
         if (len == 0)
             return Float(0.f);
         using FloatD = dr::detached_t<Float>;
         using UInt32D = dr::uint32_array_t<FloatD>;
         FloatD xd = dr::detach<false>(x);
         FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, (float) (len - 1));
-        UInt32 idx = UInt32(UInt32D(xi) + m_table_base[t]);
+        UInt32 idx = UInt32(UInt32D(xi) + code.table_base[t]);
         return dr::gather<Float>(tables, idx);
     }
 
-    Code m_code;
-    std::vector<uint32_t> m_table_base;
+    /// The decoded code (null for a default-constructed program), shared
+    /// with the regions' bodies, which may outlive this object's call.
+    const Code &c() const {
+        static const Code empty;
+        return m_code ? *m_code : empty;
+    }
+
+    std::shared_ptr<const Code> m_code;
 };
 
 } // namespace program

@@ -342,7 +342,7 @@ def _names(entries):
 
 def _assemble(n_inputs, code, outputs, tables=(), params=()):
     """A program array from its parts, in the layout core.decode_program
-    reads (format 3): code is a list of (op name or code, a, b, c); params
+    reads (format 4): code is a list of (op name or code, a, b, c); params
     (name, value) pairs."""
     ops = [(stam_core.PROGRAM_OPS.index(op) if isinstance(op, str) else op, a, b, c)
            for op, a, b, c in code]
@@ -420,7 +420,7 @@ def test_program_constants_are_the_header_and_the_core():
 
 @pytest.mark.parametrize('entry', ALL_MATERIALS, ids=_names(ALL_MATERIALS))
 def test_export_program_round_trip(entry):
-    """Every kind a material exports is a float32 array of format 3 with the
+    """Every kind a material exports is a float32 array of format 4 with the
     kind's inputs and outputs that decodes and assembles back to the same
     values; the sampling, pdf and coherent kinds exist for every material;
     a kind that is not one gives None."""
@@ -545,6 +545,46 @@ def test_decode_program_refuses_malformed_arrays():
             pytest.fail(what)
     with pytest.raises(ValueError):
         F.decode_program(good.reshape(1, -1))
+
+
+def test_program_regions():
+    """A region (If .. EndIf) runs where its mask holds: the registers it
+    defines read 0 (False) elsewhere, regions nest; decode_program refuses
+    an unclosed region, an EndIf naming another If, an If on a float, a
+    marker read and a constant inside a region."""
+    F = stam_core
+    # r0 = x, r1 = 0, r2 = 1, r3 = x > 0, If(r3) r4, r5 = x + 1, r6 = x > 1,
+    # If(r6) r7, r8 = 2 x, EndIf r9, r10 = r5 + r8, EndIf r11, r12 = x < 0
+    code = [('Input', 0, 0, 0), ('Const', 0.0, 0, 0), ('Const', 1.0, 0, 0),
+            ('Gt', 0, 1, 0), ('If', 3, 0, 0), ('Add', 0, 2, 0), ('Gt', 0, 2, 0),
+            ('If', 6, 0, 0), ('Add', 0, 0, 0), ('EndIf', 7, 0, 0), ('Add', 5, 8, 0),
+            ('EndIf', 4, 0, 0), ('Lt', 0, 1, 0), ('Select', 12, 2, 10)]
+    good = _assemble(1, code, [10, 13, 5])
+    x = np.array([-1.0, 0.5, 2.0, np.nan], dtype=np.float32)
+    out = F.run_program(good, x[:, None])
+    np.testing.assert_array_equal(out[:, 0], [0.0, 1.5, 7.0, 0.0])
+    np.testing.assert_array_equal(out[:, 1], [1.0, 1.5, 7.0, 0.0])
+    np.testing.assert_array_equal(out[:, 2], [0.0, 1.5, 3.0, 0.0])
+    code_at = 8 + 3
+
+    def broken(i, value, a=None):
+        v = good.copy()
+        v[code_at + i] = value
+        if a is not None:
+            v[code_at + i + 1] = a
+        return v
+
+    cases = {
+        'an unclosed region': broken(4 * 11, float(F.PROGRAM_OPS.index('Add')), 0.0),
+        'an EndIf naming another If': broken(4 * 9 + 1, 4.0),
+        'an If on a float': broken(4 * 4 + 1, 0.0),
+        'a marker read': broken(4 * 10 + 1, 4.0),
+        'a constant inside a region': broken(4 * 5, float(F.PROGRAM_OPS.index('Const'))),
+    }
+    for what, v in cases.items():
+        with pytest.raises(ValueError, match='not a program array'):
+            F.decode_program(v)
+            pytest.fail(what)
 
 
 def test_program_parameters():

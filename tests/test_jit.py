@@ -257,8 +257,9 @@ def export_program(brdf, kind, at_built=False):
 # Operation codes of the core's programs (rust-core/src/program/mod.rs, Op).
 PROGRAM_OPS = ('input', 'const', 'add', 'sub', 'mul', 'div', 'min', 'max', 'fma', 'neg',
                'abs', 'sqrt', 'exp', 'log', 'sin', 'cos', 'atan2', 'floor', 'lt', 'le', 'gt',
-               'ge', 'eq', 'finite', 'and', 'or', 'not', 'select', 'gather', 'param')
-PROGRAM_FORMAT = 3
+               'ge', 'eq', 'finite', 'and', 'or', 'not', 'select', 'gather', 'param', 'if',
+               'endif')
+PROGRAM_FORMAT = 4
 PROGRAM_HEADER_LEN = 8
 
 
@@ -283,7 +284,9 @@ def run_program(v, inputs, dtype=np.float64, elementary=None, params=None):
     together); returns the list of outputs. The reference of the plugin's
     executor (mitsuba-plugin/program.h). elementary: {op: function} for
     some of exp, log, sin, cos, atan2 (default numpy's). params: values by
-    parameter slot in place of the stored ones."""
+    parameter slot in place of the stored ones. A region (if .. endif) is
+    computed on every lane, its registers 0 (False) where its masks do
+    not hold, which is what skipping those lanes gives."""
     v = np.asarray(v, dtype=np.float32)
     if len(v) < PROGRAM_HEADER_LEN or int(v[0]) != PROGRAM_FORMAT or int(v[5]) != len(v):
         raise ValueError('not a program array of format %d'
@@ -301,6 +304,7 @@ def run_program(v, inputs, dtype=np.float64, elementary=None, params=None):
               for t in range(n_tab)]
     ins = np.broadcast_arrays(*[np.asarray(x, dtype=dtype) for x in inputs])
     regs = []
+    masks = []  # where each open region and those around it hold
     with np.errstate(all='ignore'):
         for i in range(n_code):
             w = v[code_at + 4 * i:code_at + 4 * i + 4]
@@ -309,6 +313,13 @@ def run_program(v, inputs, dtype=np.float64, elementary=None, params=None):
                 regs.append(dtype(w[1]))
                 continue
             a, b, c = (int(x) for x in w[1:])
+            if op in ('if', 'endif'):
+                if op == 'if':
+                    masks.append(regs[a] & masks[-1] if masks else regs[a])
+                else:
+                    masks.pop()
+                regs.append(None)
+                continue
             if op == 'input':
                 r = ins[a]
             elif op == 'param':
@@ -342,6 +353,10 @@ def run_program(v, inputs, dtype=np.float64, elementary=None, params=None):
                     'or': lambda: A | B, 'not': lambda: ~np.asarray(A, dtype=bool),
                     'select': lambda: np.where(A, B, C),
                 }[op]()
+                if r.dtype != bool:
+                    r = r.astype(dtype)
+            if masks:
+                r = np.where(masks[-1], r, False if np.asarray(r).dtype == bool else 0.0)
                 if r.dtype != bool:
                     r = r.astype(dtype)
             regs.append(r)

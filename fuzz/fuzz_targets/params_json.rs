@@ -89,7 +89,7 @@ fuzz_target!(|data: &[u8]| {
             );
         }
         // Programs: sized with NULL, nothing written into a small buffer,
-        // format 3 with the kind's inputs and outputs (stam.h), decodable;
+        // format 4 with the kind's inputs and outputs (stam.h), decodable;
         // run on the lanes (a sample's uniforms also folded into [0, 1)):
         // eval, pdf and coherent outputs finite and >= 0 (a probability
         // <= 1); a sample's flag 0 or 1 and, from uniforms in [0, 1], a

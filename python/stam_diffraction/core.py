@@ -114,18 +114,20 @@ PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
               PROGRAM_SAMPLE_RGB: (6, 4), PROGRAM_SAMPLE_SPECTRAL: (7, 4),
               PROGRAM_COHERENT_RGB: (3, 4), PROGRAM_COHERENT_SPECTRAL: (4, 2)}
 
-# The program array (format 3; rust-core/src/program/encode.rs): a header of
+# The program array (format 4; rust-core/src/program/encode.rs): a header of
 # PROGRAM_HEADER_LEN values (format, inputs, outputs, instructions, tables,
 # total length, parameters, 0), the output registers, (offset, length) per
 # table, (id, value) per parameter (PROGRAM_PARAMS; a Param's a is its slot
 # in this list), four values per instruction (op code, a, b, c; a Const's a
-# is its value), then the tables' values. Integers are stored as floats.
-PROGRAM_FORMAT = 3
+# is its value; an If's a is its mask, an EndIf's a its If), then the
+# tables' values. Integers are stored as floats.
+PROGRAM_FORMAT = 4
 PROGRAM_HEADER_LEN = 8
 # Operation codes, in code order (rust-core/src/program/mod.rs, enum Op).
 PROGRAM_OPS = ('Input', 'Const', 'Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Fma', 'Neg',
                'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos', 'Atan2', 'Floor', 'Lt', 'Le', 'Gt',
-               'Ge', 'Eq', 'Finite', 'And', 'Or', 'Not', 'Select', 'Gather', 'Param')
+               'Ge', 'Eq', 'Finite', 'And', 'Or', 'Not', 'Select', 'Gather', 'Param', 'If',
+               'EndIf')
 # Parameter ids, in code order (rust-core/src/program/mod.rs, enum ParamId;
 # stam.h's STAM_PARAM_*): the material parameters' names.
 PROGRAM_PARAMS = ('sigma_um', 'corr_um', 'corr_x_um', 'corr_y_um', 'lag_um', 'period_um',
@@ -133,9 +135,10 @@ PROGRAM_PARAMS = ('sigma_um', 'corr_um', 'corr_x_um', 'corr_y_um', 'lag_um', 'pe
 _OP = {name: code for code, name in enumerate(PROGRAM_OPS)}
 _GIVES_MASK = frozenset(_OP[n] for n in ('Lt', 'Le', 'Gt', 'Ge', 'Eq', 'Finite', 'And', 'Or',
                                          'Not'))
-_ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const', 'Param')]
+# (EndIf names its If in a: no read.)
+_ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const', 'Param', 'EndIf')]
               + [(_OP[n], 1) for n in ('Neg', 'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos',
-                                       'Floor', 'Finite', 'Not', 'Gather')]
+                                       'Floor', 'Finite', 'Not', 'Gather', 'If')]
               + [(_OP[n], 2) for n in ('Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Atan2',
                                        'Lt', 'Le', 'Gt', 'Ge', 'Eq', 'And', 'Or')]
               + [(_OP[n], 3) for n in ('Fma', 'Select')])
@@ -468,8 +471,9 @@ def decode_program(array):
     decode checks it (rust-core/src/program/encode.rs): format, length,
     sections inside the array, parameters known ids (each once) with finite
     values, every Param reading one, every operand a register defined
-    before its use and of the right kind (float or mask), outputs floats.
-    Raises ValueError otherwise."""
+    before its use and of the right kind (float or mask; a region's markers
+    read by nothing), regions (If .. EndIf) nested with no Input, Const or
+    Param inside, outputs floats. Raises ValueError otherwise."""
     v = np.asarray(array)
     if v.ndim != 1:
         raise ValueError('stam_diffraction.core: a program is a 1-D array, not %s' % (v.shape,))
@@ -516,7 +520,7 @@ def decode_program(array):
         if not np.isfinite(value):
             raise bad('parameter %d (%s) is %r' % (k, PROGRAM_PARAMS[pid], float(value)))
         params.append((PROGRAM_PARAMS[pid], value))
-    code, is_mask = [], []
+    code, is_mask, open_ifs = [], [], []
     for i in range(n_code):
         w = v[code_at + 4 * i:code_at + 4 * i + 4]
         op = integer(w[0], 'op code %d' % i)
@@ -530,18 +534,27 @@ def decode_program(array):
             raise bad('instruction %d gathers from table %d of %d' % (i, a, n_tab))
         if op == _OP['Param'] and a >= n_par:
             raise bad('instruction %d reads parameter %d of %d' % (i, a, n_par))
+        if op in (_OP['Input'], _OP['Const'], _OP['Param']) and open_ifs:
+            raise bad('instruction %d (%s) lies inside a region' % (i, PROGRAM_OPS[op]))
+        if op == _OP['EndIf'] and (not open_ifs or open_ifs.pop() != a):
+            raise bad('instruction %d ends a region that is not the innermost open one' % i)
         operands = [b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]]
         for k, r in enumerate(operands):
-            wants_mask = (op in (_OP['And'], _OP['Or'], _OP['Not'])
+            wants_mask = (op in (_OP['And'], _OP['Or'], _OP['Not'], _OP['If'])
                           or (op == _OP['Select'] and k == 0))
             if r >= i or is_mask[r] != wants_mask:
                 raise bad('instruction %d (%s) reads register %d' % (i, PROGRAM_OPS[op], r))
-        is_mask.append(op in _GIVES_MASK)
+        if op == _OP['If']:
+            open_ifs.append(i)
+        # None: a region's marker, which nothing reads.
+        is_mask.append(None if op in (_OP['If'], _OP['EndIf']) else op in _GIVES_MASK)
         code.append((op, a, b, c))
+    if open_ifs:
+        raise bad('a region is not closed')
     outputs = []
     for k in range(n_out):
         r = integer(v[PROGRAM_HEADER_LEN + k], 'output %d' % k)
-        if r >= n_code or is_mask[r]:
+        if r >= n_code or is_mask[r] is not False:
             raise bad('output %d is register %d' % (k, r))
         outputs.append(r)
     return Program(n_inputs, tuple(outputs), code, tables, tuple(params))
@@ -577,7 +590,9 @@ def run_program(program, inputs, params=None):
     (NaN to 0), then truncated (an empty table gives 0). exp, log, sin, cos
     and atan2 are taken in float64 and rounded to float32: correctly
     rounded but for rare ties, as the C library's float32 functions the
-    core calls are to within an ulp."""
+    core calls are to within an ulp. A region (If .. EndIf) is computed on
+    every lane and its registers set to 0 (False) on the lanes its masks
+    exclude, which is what skipping them gives."""
     p = program if isinstance(program, Program) else decode_program(program)
     x = np.asarray(inputs, dtype=np.float32)
     if x.ndim == 0 or x.shape[-1] != p.n_inputs:
@@ -610,10 +625,20 @@ def run_program(program, inputs, params=None):
     def f64(v):
         return np.asarray(v, dtype=np.float64)
 
+    # The open regions' masks, and where all of them hold.
+    masks, inside = [], None
     with np.errstate(all='ignore'):
         for op, a, b, c in p.code:
             name = PROGRAM_OPS[op]
             r = regs
+            if name in ('If', 'EndIf'):
+                if name == 'If':
+                    masks.append(r[a] if inside is None else inside & r[a])
+                else:
+                    masks.pop()
+                inside = masks[-1] if masks else None
+                regs.append(np.zeros((), f32))
+                continue
             if name == 'Input':
                 v = x[:, a]
             elif name == 'Const':
@@ -677,6 +702,8 @@ def run_program(program, inputs, params=None):
                 i = np.asarray(r[b], dtype=np.float64)
                 i = np.where(np.isnan(i), 0.0, np.clip(i, 0.0, max(len(t), 1) - 1))
                 v = t[i.astype(np.int64)] if len(t) else np.zeros(i.shape, f32)
+            if inside is not None:
+                v = np.where(inside, v, False if op in _GIVES_MASK else 0.0)
             regs.append(np.asarray(v, dtype=bool if op in _GIVES_MASK else f32))
             for r in dead_after.get(len(regs) - 1, ()):
                 regs[r] = None

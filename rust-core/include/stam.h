@@ -133,7 +133,7 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
  * and calls, dr.freeze, CUDA; docs/jit.md): straight-line array operations
  * and the tables they read, which compute what the functions above compute.
  * Layout of the float array and the operation codes: docs/jit.md (format
- * 3). Each kind takes its inputs and gives its outputs in this order
+ * 4). Each kind takes its inputs and gives its outputs in this order
  * (directions in the local frame, lambda in nm, u uniforms in [0, 1)):
  *   EVAL_RGB          wi[3] wo[3]        -> f R, G, B (no cos, no coherent lobe)
  *   EVAL_SPECTRAL     wi[3] wo[3] lambda -> f

@@ -8,7 +8,7 @@
 
 use super::energy::TableDerivative;
 use super::Brdf;
-use crate::models::FactorProgram;
+use crate::models::{FactorMaker, FactorProgram};
 use crate::optics::program::{upper_direction, PairProgram, Vec3};
 use crate::program::{Builder, Mask, Program, Value};
 use crate::sampling::program::{cosine_density_program, cosine_direction_program};
@@ -133,12 +133,14 @@ impl Brdf {
                 let (wi, wo) = (input3(&b), input3(&b));
                 let pair = PairProgram::new(&b, wi, wo);
                 if kind == ProgramKind::EvalRgb {
-                    let factor = per_wavelength.map(|e| e.pair_factor(pair.wi, pair.wo));
+                    let factor = per_wavelength.map(|e| {
+                        move || Box::new(e.pair_factor(pair.wi, pair.wo)) as Box<dyn FactorProgram>
+                    });
                     let rgb = model.reflectance_rgb_program(
                         &b,
                         &shading,
                         &pair,
-                        factor.as_ref().map(|f| f as &dyn FactorProgram),
+                        factor.as_ref().map(|f| f as FactorMaker),
                     )?;
                     // A colour-neutral factor commutes with the gamut map.
                     let scale = match energy.filter(|e| e.colour_neutral()) {

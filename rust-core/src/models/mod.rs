@@ -15,7 +15,7 @@ pub mod periodic;
 pub mod program;
 mod rgb_rule;
 
-pub use program::{FactorProgram, SampleProgram, SurfacePrograms};
+pub use program::{FactorMaker, FactorProgram, SampleProgram, SurfacePrograms};
 pub use rgb_rule::{RgbRule, MAX_RGB_NODES};
 
 use crate::error::StamError;

@@ -27,6 +27,11 @@ pub trait FactorProgram<'a> {
     fn at_nm(&self, lambda_nm: f64) -> Value<'a>;
 }
 
+/// Makes a pair's `FactorProgram` where a model first needs it, so that a
+/// model that skips lanes (`Builder::region`) computes the factor only on
+/// the lanes it does not skip.
+pub type FactorMaker<'f, 'a> = &'f dyn Fn() -> Box<dyn FactorProgram<'a> + 'a>;
+
 /// A model's programs. Directions are unit vectors above the horizon (the
 /// material checks them and zeroes its outputs elsewhere); wavelengths are
 /// inside the band where a model's output matters (outside it the material
@@ -60,15 +65,16 @@ pub trait SurfacePrograms {
 
     /// `reflectance_rgb`: F^2 K integrated against the linear sRGB
     /// matching functions (f / G), before gamut mapping; with `factor`
-    /// (the material's per-wavelength energy scaling) F^2 K factor. A model
-    /// that cannot take a factor returns None when given one (the material
-    /// gives one only for tables per wavelength: the periodic model's).
+    /// (the material's per-wavelength energy scaling, made by `factor`)
+    /// F^2 K factor. A model that cannot take a factor returns None when
+    /// given one (the material gives one only for tables per wavelength:
+    /// the periodic model's).
     fn reflectance_rgb_program<'a>(
         &self,
         _b: &'a Builder,
         _shading: &Shading,
         _pair: &PairProgram<'a>,
-        _factor: Option<&dyn FactorProgram<'a>>,
+        _factor: Option<FactorMaker<'_, 'a>>,
     ) -> Option<[Value<'a>; 3]> {
         None
     }

@@ -14,7 +14,16 @@ struct State {
     n_inputs: u32,
     /// Parameters by slot, and the register of each.
     params: Vec<(ParamId, f32, u32)>,
+    /// Per register: the `If` of the innermost region it was defined in
+    /// (OUTSIDE: none; Input, Const and Param are always outside, since
+    /// `finish` hoists them).
+    scope: Vec<u32>,
+    /// The regions open now, innermost last (their `If` registers).
+    open: Vec<u32>,
 }
+
+/// The scope of a register defined outside every region.
+const OUTSIDE: u32 = u32::MAX;
 
 /// Collects the instructions of one program.
 #[derive(Default)]
@@ -93,8 +102,63 @@ impl Builder {
 
     fn push(&self, op: Op, a: u32, b: u32, c: u32) -> u32 {
         let mut s = self.state.borrow_mut();
-        s.code.push(Instr { op, a, b, c });
+        let ins = Instr { op, a, b, c };
+        // A register defined in a region that has closed is 0 on the lanes
+        // the region skipped: only what the region returns may be read.
+        if op != Op::EndIf {
+            for r in operands(&ins) {
+                let scope = s.scope[r as usize];
+                assert!(
+                    scope == OUTSIDE || s.open.contains(&scope),
+                    "register {r} read outside its region"
+                );
+            }
+        }
+        let scope = match op {
+            Op::Input | Op::Const | Op::Param => OUTSIDE,
+            _ => s.open.last().copied().unwrap_or(OUTSIDE),
+        };
+        s.code.push(ins);
+        s.scope.push(scope);
         (s.code.len() - 1) as u32
+    }
+
+    /// `body`'s values where `mask` holds and 0 elsewhere; `body` runs only
+    /// on the lanes where it holds (`Op::If`), so that a renderer skips
+    /// the packets where it holds nowhere. A value `body` computes may be
+    /// read after the region only through what it returns.
+    pub fn region<'a, const N: usize>(
+        &'a self,
+        mask: Mask<'a>,
+        body: impl FnOnce() -> [Value<'a>; N],
+    ) -> [Value<'a>; N] {
+        let begin = self.push(Op::If, mask.id, 0, 0);
+        self.state.borrow_mut().open.push(begin);
+        let zero = self.c(0.0);
+        let out = body().map(|v| {
+            // Defined outside: a copy inside, so that it reads 0 elsewhere.
+            let inside = {
+                let s = self.state.borrow();
+                let scope = s.scope[v.id as usize];
+                scope != OUTSIDE && !s.open[..s.open.len() - 1].contains(&scope)
+            };
+            if inside {
+                v
+            } else {
+                v + zero
+            }
+        });
+        let enclosing = {
+            let mut s = self.state.borrow_mut();
+            assert_eq!(s.open.pop(), Some(begin), "regions closed out of order");
+            s.open.last().copied().unwrap_or(OUTSIDE)
+        };
+        self.push(Op::EndIf, begin, 0, 0);
+        let mut s = self.state.borrow_mut();
+        for v in &out {
+            s.scope[v.id as usize] = enclosing;
+        }
+        out
     }
 
     fn value(&self, id: u32) -> Value<'_> {
@@ -167,21 +231,48 @@ impl Builder {
     /// they do not need (the builder is empty afterwards).
     pub fn finish(&self, outputs: &[Value]) -> Program {
         let s = self.state.take();
+        assert!(s.open.is_empty(), "a region left open");
         let n = s.code.len();
+        // Each region's end, by its If.
+        let mut end = vec![0usize; n];
+        for (i, ins) in s.code.iter().enumerate() {
+            if ins.op == Op::EndIf {
+                end[ins.a as usize] = i;
+            }
+        }
         let mut live = vec![false; n];
         for o in outputs {
             live[o.id as usize] = true;
         }
-        for i in (0..n).rev() {
-            if !live[i] {
-                continue;
+        // Backwards: what the live instructions read; a region is kept
+        // (with its mask) where anything inside it is live. Repeated until
+        // nothing changes, since a kept region's mask lies before it.
+        let hoisted = |op: Op| matches!(op, Op::Input | Op::Const | Op::Param);
+        loop {
+            let mut changed = false;
+            for i in (0..n).rev() {
+                let ins = s.code[i];
+                let inside_live = || (i + 1..end[i]).any(|k| live[k] && !hoisted(s.code[k].op));
+                if ins.op == Op::If && !live[i] && inside_live() {
+                    live[i] = true;
+                    live[end[i]] = true;
+                    changed = true;
+                }
+                if !live[i] || ins.op == Op::EndIf {
+                    continue;
+                }
+                for r in operands(&ins) {
+                    changed |= !live[r as usize];
+                    live[r as usize] = true;
+                }
             }
-            let ins = s.code[i];
-            for r in operands(&ins) {
-                live[r as usize] = true;
+            if !changed {
+                break;
             }
         }
-        // Renumber the live instructions and the tables they use.
+        // Renumber the live instructions and the tables they use: inputs,
+        // constants and parameters first (none inside a region), then the
+        // rest in order.
         let mut new_id = vec![u32::MAX; n];
         let mut table_id = vec![u32::MAX; s.tables.len()];
         let mut tables = Vec::new();
@@ -189,7 +280,11 @@ impl Builder {
         let mut code = Vec::new();
         let mut inputs_seen = 0;
         let mut tables_in = s.tables.into_iter().map(Some).collect::<Vec<_>>();
-        for (i, ins) in s.code.iter().enumerate() {
+        let order = (0..n)
+            .filter(|&i| hoisted(s.code[i].op))
+            .chain((0..n).filter(|&i| !hoisted(s.code[i].op)));
+        for i in order {
+            let ins = &s.code[i];
             if ins.op == Op::Input {
                 inputs_seen = inputs_seen.max(ins.a + 1);
             }
@@ -214,6 +309,7 @@ impl Builder {
                     out.a = table_id[t];
                     out.b = map(ins.b);
                 }
+                Op::EndIf => out.a = map(ins.a),
                 _ => {
                     let k = arity(ins.op);
                     if k >= 1 {
@@ -246,6 +342,8 @@ pub(super) fn arity(op: Op) -> usize {
     match op {
         Input | Const | Param => 0,
         Neg | Abs | Sqrt | Exp | Log | Sin | Cos | Floor | Finite | Not => 1,
+        // If reads its mask; EndIf names its If (not a read: `operands`).
+        If | EndIf => 1,
         Add | Sub | Mul | Div | Min | Max | Atan2 | Lt | Le | Gt | Ge | Eq | And | Or => 2,
         Gather => 1,
         Fma | Select => 3,
@@ -256,6 +354,7 @@ pub(super) fn arity(op: Op) -> usize {
 pub(super) fn operands(ins: &Instr) -> Vec<u32> {
     match ins.op {
         Op::Gather => vec![ins.b],
+        Op::EndIf => vec![],
         op => [ins.a, ins.b, ins.c][..arity(op)].to_vec(),
     }
 }

@@ -6,7 +6,7 @@
 //! | outputs | the output registers |
 //! | 2 per table | offset (from the array's start) and length |
 //! | 2 per parameter | its id (`ParamId`, STAM_PARAM_*) and the value the program was built with |
-//! | 4 per instruction | op code, a, b, c (Const: a is the value itself; Param: a is the slot) |
+//! | 4 per instruction | op code, a, b, c (Const: a is the value itself; Param: a is the slot; If: a is the mask; EndIf: a is its If) |
 //! | the tables' values | |
 //!
 //! Integers are stored as floats (exact below 2^24; `decode` checks).
@@ -18,7 +18,7 @@ use super::builder::{arity, operands};
 use super::{Instr, Op, ParamId, Program};
 
 /// Version of the layout and of the operation set.
-pub const FORMAT: u32 = 3;
+pub const FORMAT: u32 = 4;
 /// Values before the outputs.
 pub const HEADER_LEN: usize = 8;
 
@@ -69,7 +69,9 @@ impl Program {
 }
 
 /// The program of an array made by `encode`, checked: every operand a
-/// register defined before its use and of the right kind (float or mask),
+/// register defined before its use and of the right kind (float or mask;
+/// a region's markers are read by nothing), regions nested, each `EndIf`
+/// naming the innermost open `If`, no Input, Const or Param inside one,
 /// every table inside the array, every parameter a known id (each at most
 /// once) with a finite value, every `Param` reading one of them. None for
 /// anything else.
@@ -114,7 +116,9 @@ pub fn decode(v: &[f32]) -> Option<Program> {
         params.push((id, value));
     }
     let mut code = Vec::with_capacity(n_code);
-    let mut is_mask = Vec::with_capacity(n_code);
+    // Per register: Some(whether a mask), None for a region's marker.
+    let mut is_mask: Vec<Option<bool>> = Vec::with_capacity(n_code);
+    let mut open: Vec<u32> = Vec::new();
     for i in 0..n_code {
         let w = &v[code_at + 4 * i..code_at + 4 * i + 4];
         let op = Op::from_code(int(w[0])?)?;
@@ -133,27 +137,33 @@ pub fn decode(v: &[f32]) -> Option<Program> {
             Op::Input if a >= n_inputs => return None,
             Op::Gather if a as usize >= n_tab => return None,
             Op::Param if a as usize >= n_par => return None,
+            Op::Input | Op::Const | Op::Param if !open.is_empty() => return None,
+            Op::If => open.push(i as u32),
+            Op::EndIf if open.pop() != Some(a) => return None,
             _ => {}
         }
         // Operand kinds: masks where the operation takes masks.
         let wants_mask = |k: usize| match op {
-            Op::And | Op::Or | Op::Not => true,
+            Op::And | Op::Or | Op::Not | Op::If => true,
             Op::Select => k == 0,
             _ => false,
         };
         for (k, r) in operands(&ins).into_iter().enumerate() {
-            if r as usize >= i || is_mask[r as usize] != wants_mask(k) {
+            if r as usize >= i || is_mask[r as usize] != Some(wants_mask(k)) {
                 return None;
             }
         }
         let _ = arity(op);
-        is_mask.push(op.gives_mask());
+        is_mask.push((!op.is_marker()).then_some(op.gives_mask()));
         code.push(ins);
+    }
+    if !open.is_empty() {
+        return None;
     }
     let mut outputs = Vec::with_capacity(n_out);
     for k in 0..n_out {
         let r = int(v[HEADER_LEN + k])?;
-        if r as usize >= n_code || is_mask[r as usize] {
+        if r as usize >= n_code || is_mask[r as usize] != Some(false) {
             return None;
         }
         outputs.push(r);

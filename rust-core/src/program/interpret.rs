@@ -110,7 +110,16 @@ impl Program {
         regs.clear();
         regs.reserve(self.code.len());
         let flag = |m: bool| if m { T::one() } else { T::zero() };
-        for ins in &self.code {
+        // Inside a region this lane skips: until its EndIf, registers 0.
+        let mut skipping: Option<u32> = None;
+        for (i, ins) in self.code.iter().enumerate() {
+            if let Some(begin) = skipping {
+                if ins.op == Op::EndIf && ins.a == begin {
+                    skipping = None;
+                }
+                regs.push(T::zero());
+                continue;
+            }
             let r = |i: u32| regs[i as usize];
             let v = match ins.op {
                 Op::Input => inputs[ins.a as usize],
@@ -158,6 +167,13 @@ impl Program {
                     };
                     T::from_f32(t.get(i).copied().unwrap_or(0.0))
                 }
+                Op::If => {
+                    if !(r(ins.a) > T::zero()) {
+                        skipping = Some(i as u32);
+                    }
+                    T::zero()
+                }
+                Op::EndIf => T::zero(),
             };
             regs.push(v);
         }

@@ -6,9 +6,11 @@
 //! is the result of instruction i. Each instruction is one array operation
 //! a renderer has (arithmetic, exp/log/sqrt/trigonometry, compare and
 //! select, a gather from a table); bounded loops are unrolled when the
-//! program is built. A model writes its program with [`Builder`], whose
-//! values overload the arithmetic operators, so that the code reads as the
-//! formula. This module knows no model: models and the material build
+//! program is built. A region (`Op::If` .. `Op::EndIf`, built with
+//! `Builder::region`) runs only on the lanes that need it, so that a
+//! renderer skips the SIMD packets or warps none of whose lanes does. A
+//! model writes its program with [`Builder`], whose values overload the
+//! arithmetic operators, so that the code reads as the formula. This module knows no model: models and the material build
 //! their programs on it, the ABI exports them ([`Program::encode`]), the
 //! plugin executes them with Dr.Jit, and [`Program::run`] executes them on
 //! the CPU, so that tests compare a program against the native path.
@@ -72,17 +74,28 @@ pub enum Op {
     /// value for every lane; `Program::params`, the array's parameter
     /// section): what a renderer differentiates or textures.
     Param = 29,
+    /// The start of a region that runs only on the lanes where mask a
+    /// holds (a renderer branches: Dr.Jit's `if_stmt`, which skips a SIMD
+    /// packet or GPU warp none of whose lanes needs it). Regions nest; each
+    /// ends at the `EndIf` naming it. Every register defined inside a
+    /// region reads 0 (false for a mask) on the other lanes. Input, Const
+    /// and Param never lie inside a region (`Builder::finish` hoists them).
+    /// Its register holds no value and is read only by its `EndIf`.
+    If = 30,
+    /// The end of the region whose `If` is register a (no value).
+    EndIf = 31,
 }
 
 /// The number of operations (codes 0 .. OP_COUNT - 1).
-pub const OP_COUNT: u32 = 30;
+pub const OP_COUNT: u32 = 32;
 
 impl Op {
     pub fn from_code(code: u32) -> Option<Op> {
         use Op::*;
         const ALL: [Op; OP_COUNT as usize] = [
             Input, Const, Add, Sub, Mul, Div, Min, Max, Fma, Neg, Abs, Sqrt, Exp, Log, Sin, Cos,
-            Atan2, Floor, Lt, Le, Gt, Ge, Eq, Finite, And, Or, Not, Select, Gather, Param,
+            Atan2, Floor, Lt, Le, Gt, Ge, Eq, Finite, And, Or, Not, Select, Gather, Param, If,
+            EndIf,
         ];
         ALL.get(code as usize).copied()
     }
@@ -91,6 +104,11 @@ impl Op {
     pub fn gives_mask(self) -> bool {
         use Op::*;
         matches!(self, Lt | Le | Gt | Ge | Eq | Finite | And | Or | Not)
+    }
+
+    /// Whether it marks a region (its register holds no value).
+    pub fn is_marker(self) -> bool {
+        matches!(self, Op::If | Op::EndIf)
     }
 }
 

@@ -1,6 +1,6 @@
 //! Programs with parameters: the encoded array round trip, `decode`
 //! refusing bad parameter sections and operands, the executor reading the
-//! stored values or the given ones.
+//! stored values or the given ones; regions.
 
 use super::{decode, Builder, Op, ParamId, Program, HEADER_LEN, PARAM_COUNT};
 
@@ -80,7 +80,8 @@ fn param_ids_are_their_codes() {
     }
     assert_eq!(ParamId::from_code(PARAM_COUNT), None);
     assert_eq!(Op::from_code(29), Some(Op::Param));
-    assert_eq!(Op::from_code(30), None);
+    assert_eq!(Op::from_code(31), Some(Op::EndIf));
+    assert_eq!(Op::from_code(super::OP_COUNT), None);
 }
 
 #[test]
@@ -95,4 +96,98 @@ fn select_chain_reads_the_indexed_value_and_clamps() {
     }
     assert_eq!(p.run(&[-3.0f64]), vec![values[0]]);
     assert_eq!(p.run(&[9.0f64]), vec![values[3]]);
+}
+
+/// f = x > 0 ? (x + 1) * 2 + (x > 1 ? 10 x : 0) : 0, and g = x + 3 (a
+/// value from outside returned by the region) with regions nested; the
+/// inner constants are hoisted out of them.
+fn regions() -> Program {
+    let b = Builder::new();
+    let x = b.input();
+    let unused = b.region(x.gt(5.0), || [x * 7.0]);
+    let _ = unused;
+    let outer = x + 3.0;
+    let [f, g] = b.region(x.gt(0.0), || {
+        let y = (x + 1.0) * 2.0;
+        let [z] = b.region(x.gt(1.0), || [x * 10.0]);
+        [y + z, outer]
+    });
+    b.finish(&[f, g, outer])
+}
+
+#[test]
+fn regions_run_where_their_mask_holds() {
+    let p = regions();
+    // The dead region is dropped; two Ifs and their EndIfs are kept.
+    assert_eq!(p.code.iter().filter(|i| i.op == Op::If).count(), 2);
+    assert_eq!(p.code.iter().filter(|i| i.op == Op::EndIf).count(), 2);
+    // Inputs and constants come before every region.
+    let first_if = p.code.iter().position(|i| i.op == Op::If).unwrap();
+    assert!(p.code[first_if..]
+        .iter()
+        .all(|i| !matches!(i.op, Op::Input | Op::Const | Op::Param)));
+    let q = decode(&p.encode()).expect("decodes");
+    assert_eq!(q.code, p.code);
+    for (x, f, g) in [
+        (-1.0, 0.0, 0.0),
+        (0.5, 3.0, 3.5),
+        (2.0, 26.0, 5.0),
+        (f64::NAN, 0.0, 0.0),
+    ] {
+        let out = q.run(&[x]);
+        assert_eq!(out[..2], [f, g], "x = {x}");
+        assert!(out[2].to_bits() == (x + 3.0).to_bits() || x.is_nan());
+    }
+}
+
+#[test]
+fn decode_refuses_bad_regions() {
+    let p = regions();
+    let v = p.encode();
+    let code_at = HEADER_LEN + p.outputs.len() + 2 * p.tables.len() + 2 * p.params.len();
+    let at = |op: Op, k: usize| {
+        p.code
+            .iter()
+            .enumerate()
+            .filter(|(_, i)| i.op == op)
+            .nth(k)
+            .unwrap()
+            .0
+    };
+    let refused = |what: &str, f: &dyn Fn(&mut Vec<f32>)| {
+        let mut w = v.clone();
+        f(&mut w);
+        assert!(decode(&w).is_none(), "{what} was accepted");
+    };
+    let (if0, end0) = (at(Op::If, 0), at(Op::EndIf, 1));
+    refused("an EndIf naming the wrong If", &|w| {
+        w[code_at + 4 * end0 + 1] = at(Op::If, 1) as f32
+    });
+    refused("an unclosed region", &|w| {
+        w[code_at + 4 * end0] = Op::Add as u32 as f32;
+        w[code_at + 4 * end0 + 1] = 0.0;
+        w[code_at + 4 * end0 + 2] = 0.0;
+    });
+    refused("an If on a float", &|w| w[code_at + 4 * if0 + 1] = 0.0);
+    refused("a marker read", &|w| {
+        let k = at(Op::Add, 1);
+        w[code_at + 4 * k + 1] = if0 as f32;
+    });
+    refused("a constant inside a region", &|w| {
+        let k = if0 + 1;
+        w[code_at + 4 * k] = Op::Const as u32 as f32;
+    });
+}
+
+#[test]
+#[should_panic(expected = "outside its region")]
+fn a_region_keeps_its_values() {
+    let b = Builder::new();
+    let x = b.input();
+    let mut leaked = None;
+    let _ = b.region(x.gt(0.0), || {
+        leaked = Some(x * 2.0);
+        [x]
+    });
+    let _ = leaked.unwrap() + 1.0;
 }

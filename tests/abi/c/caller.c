@@ -107,10 +107,10 @@ static int check_coherent_probability(const StamBrdf *b, const float *wi, const 
     return 0;
 }
 
-/* Checks of stam_brdf_export_program (stam.h; layout: format 3): every
+/* Checks of stam_brdf_export_program (stam.h; layout: format 4): every
  * kind sized with out = NULL, nothing written into a buffer that is too
  * small (4 floats, or one short), the whole array written into one of the
- * returned size and nothing past it; the header: format 3, the kind's
+ * returned size and nothing past it; the header: format 4, the kind's
  * numbers of inputs and outputs, the total length, sections that fit in
  * the array, output registers and table offsets inside it. Every kind
  * exists for every material (the JIT variants run nothing else); a kind
@@ -147,7 +147,7 @@ static int check_export_program(const StamBrdf *b, char *report, size_t report_l
          * parameters (counts read as integers only once they are known to
          * lie in [0, n]). */
         const float *h = prog;
-        int layout_ok = sized_ok && h[0] == 3.0f && h[1] == (float)io[kind][0] &&
+        int layout_ok = sized_ok && h[0] == 4.0f && h[1] == (float)io[kind][0] &&
                         h[2] == (float)io[kind][1] && h[5] == (float)n;
         for (int j = 2; layout_ok && j < 7; ++j)
             layout_ok = h[j] >= 0.0f && h[j] <= (float)n && h[j] == floorf(h[j]);

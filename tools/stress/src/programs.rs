@@ -3,7 +3,7 @@
 //! and run lane by lane with the core's CPU executor in f32, as a
 //! renderer's kernel runs it. This is how the stress runner and the fuzzers
 //! reach the programs. The contract checked (stam.h's list of kinds):
-//! - the array: format 3, its own length, decodable, with the kind's
+//! - the array: format 4, its own length, decodable, with the kind's
 //!   numbers of inputs and outputs;
 //! - eval, pdf and coherent kinds: every output finite and >= 0 at any
 //!   input; a coherent probability <= 1; 0 where a direction the kind

@@ -35,7 +35,7 @@ use super::math::{LN_2PI, LN_PI};
 use super::profile::ProfileParts;
 use super::sampling::{RadialProposal, LOBE_SHARE_POWER};
 use super::{Fractal, FractalSurface, LN_4PI2};
-use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::{Builder, ParamId, Table, Value};
@@ -240,7 +240,7 @@ impl SurfacePrograms for Fractal {
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
-        factor: Option<&dyn FactorProgram<'a>>,
+        factor: Option<FactorMaker<'_, 'a>>,
     ) -> Option<[Value<'a>; 3]> {
         if factor.is_some() {
             return None;

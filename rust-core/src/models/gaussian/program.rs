@@ -37,7 +37,7 @@
 use super::sampling::{AlbedoTable, BECKMANN_MIN_G};
 use super::series::{series_table_export, SeriesTableExport};
 use super::{Gaussian, GaussianSurface, COHERENT_MAX_G};
-use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorMaker, FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::lookup::bspline_weights;
@@ -661,7 +661,7 @@ impl SurfacePrograms for Gaussian {
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
-        factor: Option<&dyn FactorProgram<'a>>,
+        factor: Option<FactorMaker<'_, 'a>>,
     ) -> Option<[Value<'a>; 3]> {
         if factor.is_some() {
             return None;

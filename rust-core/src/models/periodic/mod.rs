@@ -84,6 +84,9 @@ pub struct Periodic {
     /// The sampling strategy's order weights over the incident direction,
     /// made on the first sample.
     grating: OnceLock<Option<sampling::GratingTable>>,
+    /// The RGB sampling programs' order weights and tilts over the
+    /// incident direction (program_sampling.rs), made on the first build.
+    rgb_orders: OnceLock<Option<Vec<f32>>>,
 }
 
 impl Periodic {
@@ -100,6 +103,7 @@ impl Periodic {
                 PeriodicSurface::broad_rule_wavelengths(),
             ),
             grating: OnceLock::new(),
+            rgb_orders: OnceLock::new(),
         })
     }
 

@@ -15,7 +15,7 @@
 use super::{
     Model, Periodic, PeriodicSurface, Profile, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT,
 };
-use crate::models::{FactorProgram, SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::{Builder, Mask, ParamId, Table, Value};
 use std::f64::consts::PI;
@@ -455,7 +455,7 @@ impl SurfacePrograms for Periodic {
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
-        factor: Option<&dyn FactorProgram<'a>>,
+        factor: Option<FactorMaker<'_, 'a>>,
     ) -> Option<[Value<'a>; 3]> {
         self.rgb_program(b, shading, pair, factor)
     }

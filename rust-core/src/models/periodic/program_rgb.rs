@@ -35,7 +35,7 @@
 use super::program::{rect_s2, PowerAt, PowerProgram, ProfileProgram, RectOrder};
 use super::{Periodic, PeriodicSurface, RGB_BROAD_SIGMA, RGB_PEAK_HALF_WIDTH_SIGMAS};
 use super::{RGB_SMOOTH_NODES, RGB_TAIL_EXPONENT};
-use crate::models::{FactorProgram, Shading};
+use crate::models::{FactorMaker, Shading};
 use crate::optics::fresnel::Fresnel;
 use crate::optics::program::PairProgram;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
@@ -687,7 +687,7 @@ impl Periodic {
         b: &'a Builder,
         shading: &Shading,
         pair: &PairProgram<'a>,
-        factor: Option<&dyn FactorProgram<'a>>,
+        factor: Option<FactorMaker<'_, 'a>>,
     ) -> Option<[Value<'a>; 3]> {
         let p = &self.surface;
         // The period, the coherence length, the profile's height (and a
@@ -752,19 +752,7 @@ impl Periodic {
         };
         let (u, v, w) = (pair.u, pair.v, pair.w);
         let refl = Reflectance::new(b, shading.fresnel, pair.cos_half);
-        // F^2 (1 when flat: applied at the end) times the factor, at a
-        // wavenumber and at a node of the broad rule.
-        let refl_at = |nu: Value<'a>| match (factor, refl.flat()) {
-            (None, _) => refl.at(b, nu),
-            (Some(f), Some(_)) => f.at(1000.0 / nu),
-            (Some(f), None) => refl.at(b, nu) * f.at(1000.0 / nu),
-        };
         let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
-        let refl_at_node = |j: usize| match (factor, refl.flat()) {
-            (None, _) => refl.at_node(b, j),
-            (Some(f), Some(_)) => f.at_nm(rule.lambda_nm[j]),
-            (Some(f), None) => refl.at_node(b, j) * f.at_nm(rule.lambda_nm[j]),
-        };
         let rho2 = u * u + v * v;
         let positive = rho2.gt(0.0);
         let rho2 = positive.select(rho2, 1.0);
@@ -789,7 +777,10 @@ impl Periodic {
             OrderPeak { take, a_n, mu }
         };
 
-        // Narrow peaks.
+        // Which orders each lane takes, first (a few operations per order),
+        // so that lanes taking none skip the rest (most lanes: an order's
+        // peak is narrow across the grooves, exp(-a_n)) and each order's
+        // integration runs only where some lane of a packet takes it.
         let slack = match l {
             Some(_) => RGB_TAIL_EXPONENT.sqrt() / two_pi_l,
             None => b.c(RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * p.coherence_um)),
@@ -798,90 +789,127 @@ impl Periodic {
         let (x0, x1) = (xa.min(xb), xa.max(xb));
         let n_first = -((slack - x0) * lam).floor(); // ceil((x0 - slack) Lam)
         let n_last = ((x1 + slack) * lam).floor();
-        // C1 along the parameters a renderer differentiates.
-        let table = SmoothedWeight::new(
-            b,
-            &plan,
-            t,
-            follows && b.differentiated(ParamId::PeriodUm),
-            follows && b.differentiated(ParamId::CoherenceUm),
-        );
-        let norm = s * (2.0 * PI).sqrt();
-        let mut narrow_sum = [b.c(0.0); 3];
-        for i in 0..plan.narrow_orders {
-            let n = n_first + i as f64;
-            let pk = peak(n);
-            let take = pk.take & n.le(n_last) & !n.eq(0.0);
-            let mu = pk.mu;
-            // Significant part [a, bb] of the peak inside the band.
-            let reach = s * RGB_PEAK_HALF_WIDTH_SIGMAS;
-            let d0 = (-mu + NU_LO).max(0.0) + (mu - NU_HI).max(0.0);
-            let r = (d0 * d0 + reach * reach).sqrt();
-            let a = (mu - r).max(NU_LO);
-            let bb = (mu + r).min(NU_HI);
-            let delta = (s * 3f64.sqrt()).min((bb - a) * 0.5).max(1e-9);
-            let c = mu.max(a + delta).min(bb - delta);
-            let rect = rect_order(n);
-            let s_at = |nu: Value<'a>| {
-                let beta = nu * w * (2.0 * PI);
-                refl_at(nu) * nu * nu * power_rgb(beta, n, rect)
-            };
-            let (sm, s0, sp) = (s_at(c - delta), s_at(c), s_at(c + delta));
-            let inv_2d = 0.5 / delta;
-            let d1 = (sp - sm) * inv_2d;
-            let d2 = (sp - s0 * 2.0 + sm) * (inv_2d / delta);
-            let e = c - mu;
-            let a0 = s0 - d1 * e + d2 * e * e;
-            let a1 = d1 - d2 * e * 2.0;
-            let a2 = d2;
-            let [wv, wm, wt] = table.at(b, mu);
-            let scale = c_const * (-pk.a_n).exp() * norm;
-            let k0 = a0 + a2 * t;
-            let k1 = a1 * t;
-            let k2 = a2 * t * t * 2.0;
-            for ch in 0..3 {
-                let term = scale * (k0 * wv[ch] + k1 * wm[ch] + k2 * wt[ch]);
-                narrow_sum[ch] = narrow_sum[ch] + take.select(term, 0.0);
-            }
-        }
-
-        // Broad peaks: the 32-node rule over orders -broad..=broad.
-        let orders: Vec<(f64, Mask<'a>, Option<RectOrder<'a>>)> = (-plan.broad..=plan.broad)
+        let narrow_orders: Vec<(Value<'a>, OrderPeak<'a>, Mask<'a>)> = (0..plan.narrow_orders)
+            .map(|i| {
+                let n = n_first + i as f64;
+                let pk = peak(n);
+                let take = narrow & pk.take & n.le(n_last) & !n.eq(0.0);
+                (n, pk, take)
+            })
+            .collect();
+        let broad_orders: Vec<(f64, Mask<'a>, Option<RectOrder<'a>>)> = (-plan.broad..=plan.broad)
             .map(|n| {
                 let nv = b.c(n as f64);
                 (n as f64, peak(nv).take, rect_order(nv))
             })
             .collect();
-        let mut broad_sum = [b.c(0.0); 3];
-        for (j, (&nu, weights)) in rule.nu_per_um.iter().zip(&rule.weights).enumerate() {
-            let beta = w * (2.0 * PI * nu);
-            let (at, s2): (Option<PowerAt>, _) = match profile {
-                ProfileProgram::Rect { height, .. } => (None, Some(rect_s2(beta, height))),
-                ProfileProgram::Scaled(_) => (Some(powers.at(b, profile.scaled_beta(beta))), None),
-            };
-            let ev = (v * two_pi_l_times(nu)).sq();
-            let mut sum = b.c(0.0);
-            for &(n, take, rect) in &orders {
-                let d = (u * nu - inv_lam * n) * two_pi_l;
-                let e = d.fma(d, ev);
-                let power = match (rect, s2, &at) {
-                    (Some(r), Some(s2), _) => r.power(s2),
-                    (_, _, Some(at)) => powers.power_const(b, at, n as i64),
-                    _ => unreachable!("the powers are prepared for the profile"),
-                };
-                let term = power * (-e).exp();
-                sum = sum + (take & e.lt(700.0)).select(term, 0.0);
-            }
-            let val = refl_at_node(j) * (nu * nu) * c_const * sum;
-            for ch in 0..3 {
-                broad_sum[ch] = broad_sum[ch] + val * weights[ch];
-            }
-        }
+        let any_narrow = narrow_orders.iter().map(|o| o.2).reduce(|x, y| x | y);
+        let any_broad = broad_orders.iter().map(|o| o.1).reduce(|x, y| x | y);
+        let any = match (any_narrow, any_broad) {
+            (Some(n), Some(w)) => n | (!narrow & w),
+            (Some(n), None) => n,
+            (None, Some(w)) => !narrow & w,
+            (None, None) => return Some([b.c(0.0); 3]),
+        };
+
         let flat = refl.flat().unwrap_or_else(|| b.c(1.0));
-        Some(std::array::from_fn(|ch| {
-            let out = narrow.select(narrow_sum[ch], broad_sum[ch]) * flat;
-            (ok & out.finite()).select(out, 0.0)
-        }))
+        let rgb = b.region(ok & any, || {
+            // F^2 (1 when flat: applied at the end) times the factor, at a
+            // wavenumber and at a node of the broad rule.
+            let factor = factor.map(|make| make());
+            let factor = factor.as_deref();
+            let refl_at = |nu: Value<'a>| match (factor, refl.flat()) {
+                (None, _) => refl.at(b, nu),
+                (Some(f), Some(_)) => f.at(1000.0 / nu),
+                (Some(f), None) => refl.at(b, nu) * f.at(1000.0 / nu),
+            };
+            let refl_at_node = |j: usize| match (factor, refl.flat()) {
+                (None, _) => refl.at_node(b, j),
+                (Some(f), Some(_)) => f.at_nm(rule.lambda_nm[j]),
+                (Some(f), None) => refl.at_node(b, j) * f.at_nm(rule.lambda_nm[j]),
+            };
+
+            // Narrow peaks, each order where some lane takes it.
+            // C1 along the parameters a renderer differentiates.
+            let table = SmoothedWeight::new(
+                b,
+                &plan,
+                t,
+                follows && b.differentiated(ParamId::PeriodUm),
+                follows && b.differentiated(ParamId::CoherenceUm),
+            );
+            let norm = s * (2.0 * PI).sqrt();
+            let mut narrow_sum = [b.c(0.0); 3];
+            for &(n, ref pk, take) in &narrow_orders {
+                let terms: [Value<'a>; 3] = b.region(take, || {
+                    let mu = pk.mu;
+                    // Significant part [a, bb] of the peak inside the band.
+                    let reach = s * RGB_PEAK_HALF_WIDTH_SIGMAS;
+                    let d0 = (-mu + NU_LO).max(0.0) + (mu - NU_HI).max(0.0);
+                    let r = (d0 * d0 + reach * reach).sqrt();
+                    let a = (mu - r).max(NU_LO);
+                    let bb = (mu + r).min(NU_HI);
+                    let delta = (s * 3f64.sqrt()).min((bb - a) * 0.5).max(1e-9);
+                    let c = mu.max(a + delta).min(bb - delta);
+                    let rect = rect_order(n);
+                    let s_at = |nu: Value<'a>| {
+                        let beta = nu * w * (2.0 * PI);
+                        refl_at(nu) * nu * nu * power_rgb(beta, n, rect)
+                    };
+                    let (sm, s0, sp) = (s_at(c - delta), s_at(c), s_at(c + delta));
+                    let inv_2d = 0.5 / delta;
+                    let d1 = (sp - sm) * inv_2d;
+                    let d2 = (sp - s0 * 2.0 + sm) * (inv_2d / delta);
+                    let e = c - mu;
+                    let a0 = s0 - d1 * e + d2 * e * e;
+                    let a1 = d1 - d2 * e * 2.0;
+                    let a2 = d2;
+                    let [wv, wm, wt] = table.at(b, mu);
+                    let scale = c_const * (-pk.a_n).exp() * norm;
+                    let k0 = a0 + a2 * t;
+                    let k1 = a1 * t;
+                    let k2 = a2 * t * t * 2.0;
+                    std::array::from_fn(|ch| scale * (k0 * wv[ch] + k1 * wm[ch] + k2 * wt[ch]))
+                });
+                for ch in 0..3 {
+                    narrow_sum[ch] = narrow_sum[ch] + terms[ch];
+                }
+            }
+
+            // Broad peaks: the 32-node rule over orders -broad..=broad.
+            let broad_sum = b.region(!narrow, || {
+                let mut broad_sum = [b.c(0.0); 3];
+                for (j, (&nu, weights)) in rule.nu_per_um.iter().zip(&rule.weights).enumerate() {
+                    let beta = w * (2.0 * PI * nu);
+                    let (at, s2): (Option<PowerAt>, _) = match profile {
+                        ProfileProgram::Rect { height, .. } => (None, Some(rect_s2(beta, height))),
+                        ProfileProgram::Scaled(_) => {
+                            (Some(powers.at(b, profile.scaled_beta(beta))), None)
+                        }
+                    };
+                    let ev = (v * two_pi_l_times(nu)).sq();
+                    let mut sum = b.c(0.0);
+                    for &(n, take, rect) in &broad_orders {
+                        let d = (u * nu - inv_lam * n) * two_pi_l;
+                        let e = d.fma(d, ev);
+                        let power = match (rect, s2, &at) {
+                            (Some(r), Some(s2), _) => r.power(s2),
+                            (_, _, Some(at)) => powers.power_const(b, at, n as i64),
+                            _ => unreachable!("the powers are prepared for the profile"),
+                        };
+                        let term = power * (-e).exp();
+                        sum = sum + (take & e.lt(700.0)).select(term, 0.0);
+                    }
+                    let val = refl_at_node(j) * (nu * nu) * c_const * sum;
+                    for ch in 0..3 {
+                        broad_sum[ch] = broad_sum[ch] + val * weights[ch];
+                    }
+                }
+                broad_sum
+            });
+            std::array::from_fn(|ch| narrow.select(narrow_sum[ch], broad_sum[ch]) * flat)
+        });
+        Some(rgb.map(|out| (ok & out.finite()).select(out, 0.0)))
     }
 }
 

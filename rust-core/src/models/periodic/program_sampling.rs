@@ -1,8 +1,10 @@
 //! The sampling programs of gratings (see program.rs): the orders' lobes of
-//! sampling.rs with exact per-wi order weights instead of the grating
-//! table's cells (a program cannot build tables per incident direction;
-//! the weights only steer the sampling, the pdf is exact for whatever
-//! weights).
+//! sampling.rs. One wavelength: exact per-wi order weights. RGB: the exact
+//! weights and tilts at the centre of wi's cell of a grid over (wi.x,
+//! wi.y) (`rgb_order_table`, as the native grating table's cells), made
+//! once per material by running their program on the CPU: two gathers per
+//! order in place of three order weights per order. The weights only steer
+//! the sampling; the pdf is exact for whatever weights.
 //!
 //! One wavelength: order n (centre u_n = n lambda / Lam inside the disk)
 //! with probability ~ |c_n(k w_n)|^2 min(G / w^2, 50) at its centre
@@ -35,7 +37,7 @@ use crate::models::{SampleProgram, Shading};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::Vec3;
 use crate::program::lookup::select_chain;
-use crate::program::{Builder, Mask, Value};
+use crate::program::{Builder, Value};
 use crate::sampling::{band_density, DEFENSIVE_FRACTION, RGB_BAND_NM};
 use std::f64::consts::{PI, SQRT_2};
 use std::sync::OnceLock;
@@ -105,18 +107,21 @@ fn zero_order_nodes() -> Vec<(f64, f64)> {
 
 /// What the sampling programs of one material and mode share.
 struct Orders<'a> {
-    /// Orders first..first + count (unrolled, masked by `take`).
+    /// One wavelength: orders first..first + count (unrolled); RGB: orders
+    /// -n_max..=n_max but 0, then order 0.
     n: Vec<Value<'a>>,
-    take: Vec<Mask<'a>>,
     /// Unnormalised probabilities (0 where not taken) and their sum.
     weight: Vec<Value<'a>>,
     total: Value<'a>,
-    /// RGB: whether the entry is order 0 (the mirror lobe), the band mass
-    /// of the wavelengths where the order's centre is inside the disk, and
-    /// its tilt kappa.
+    /// RGB: whether the entry is order 0 (the mirror lobe), and the tilt
+    /// kappa of its wavelengths.
     zero: Vec<bool>,
-    band: Vec<[Value<'a>; 2]>,
+    tilt: Vec<Value<'a>>,
 }
+
+/// Cells per axis of the RGB order table over (wi.x, wi.y) (as the native
+/// `GratingTable`'s finest): 2,304 cells.
+const ORDER_CELLS_PER_AXIS: usize = 48;
 
 impl Periodic {
     /// Orders whose centre can be inside the disk: |u_n| <= 2 at the
@@ -150,7 +155,9 @@ impl Periodic {
         let beta = -(2000.0 * PI) * w / lambda;
         // A sine profile's table is read at the point's height (scaled
         // beta, as the evals read it), so that the orders' weights follow
-        // it (a height texture's above all); other profiles keep beta.
+        // it (a height texture's above all; one wavelength only: the RGB
+        // order table is made at the built height); other profiles keep
+        // beta.
         let beta = self
             .surface
             .profile_program(b, b.c(self.surface.period_um))
@@ -176,11 +183,10 @@ impl Periodic {
         let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
         let mut out = Orders {
             n: Vec::new(),
-            take: Vec::new(),
             weight: Vec::new(),
             total: b.c(0.0),
             zero: Vec::new(),
-            band: Vec::new(),
+            tilt: Vec::new(),
         };
         match lambda {
             Some(lambda) => {
@@ -192,69 +198,132 @@ impl Periodic {
                 for i in 0..count {
                     let n = first + i as f64;
                     let take = n.le(last);
-                    let w = take.select(self.order_weight_program(b, powers, wi, n, lambda), 0.0);
+                    // Only where some lane's centre is inside the disk.
+                    let [w] = b.region(take, || {
+                        [self.order_weight_program(b, powers, wi, n, lambda)]
+                    });
                     out.total = out.total + w;
                     out.n.push(n);
-                    out.take.push(take);
                     out.weight.push(w);
                 }
             }
             None => {
-                let (lo, hi) = RGB_BAND_NM;
-                let count = self.sampling_order_count(lo)?;
-                // Orders n != 0 whose centre is inside the disk for some
-                // lambda of the band: n lambda / P in (a, b).
-                let (a, bb) = (-wi[0] - half, -wi[0] + half);
-                let (a_lo, a_hi) = (a * (period_nm / lo), a * (period_nm / hi));
-                let (b_lo, b_hi) = (bb * (period_nm / lo), bb * (period_nm / hi));
-                let first = -(-a_lo.min(a_hi)).floor(); // ceil
-                let last = b_lo.max(b_hi).floor();
-                let mut entries: Vec<(Value<'a>, Mask<'a>, bool)> = (0..count)
-                    .map(|i| {
-                        let n = first + i as f64;
-                        (n, n.le(last) & !n.eq(0.0), false)
-                    })
-                    .collect();
-                // Order 0, always (the mirror lobe).
-                entries.push((b.c(0.0), b.always(), true));
-                for (nv, in_range, zero) in entries {
-                    let (la, lb) = if zero {
-                        (b.c(lo), b.c(hi))
-                    } else {
-                        // lambda where -wi.x - n lambda / P is within half.
-                        let inv_n = 1.0 / in_range.select(nv, 1.0);
-                        let (p, q) = (a * period_nm * inv_n, bb * period_nm * inv_n);
-                        (p.min(q).max(lo), p.max(q).min(hi))
-                    };
-                    let mass = (band_cdf(b, lb) - band_cdf(b, la)).max(0.0);
-                    let mid = (la + lb) * 0.5;
-                    let w = self.order_weight_program(b, powers, wi, nv, mid) * mass;
-                    // Tilt of the wavelength density towards the end of the
-                    // interval with the larger weight (the rim, where G
-                    // grows): exp(kappa c) in the band's CDF c.
-                    let kappa = if zero {
-                        b.c(0.0)
-                    } else {
-                        let e = (lb - la) * TILT_INSET;
-                        let qa = self.order_weight_program(b, powers, wi, nv, la + e);
-                        let qb = self.order_weight_program(b, powers, wi, nv, lb - e);
-                        let k = ((qb + 1e-30) / (qa + 1e-30))
-                            .ln()
-                            .clamp(-TILT_MAX, TILT_MAX);
-                        k.finite().select(k, 0.0)
-                    };
-                    let take = in_range & la.lt(lb) & mass.gt(0.0);
-                    let w = take.select(w, 0.0);
+                // The exact weights and tilts at the centre of wi's cell
+                // (`rgb_order_table`): sample and pdf read the same ones,
+                // so the density stays exact for them.
+                let (table, n_max) = self.rgb_order_table()?;
+                let entries = 2 * n_max + 1;
+                let cells = ORDER_CELLS_PER_AXIS as f64;
+                let index =
+                    |x: Value<'a>| ((x + 1.0) * (0.5 * cells)).floor().clamp(0.0, cells - 1.0);
+                let base = (index(wi[1]) * cells + index(wi[0])) * (2 * entries) as f64;
+                let t = b.table(table.to_vec());
+                for (j, n) in rgb_order_list(n_max).into_iter().enumerate() {
+                    let w = b.gather(t, base + j as f64);
                     out.total = out.total + w;
-                    out.n.push(nv);
-                    out.take.push(take);
+                    out.n.push(b.c(n as f64));
                     out.weight.push(w);
-                    out.zero.push(zero);
-                    out.band.push([mass, kappa]);
+                    out.zero.push(n == 0);
+                    out.tilt.push(b.gather(t, base + (entries + j) as f64));
                 }
             }
         }
         Some(out)
+    }
+
+    /// The RGB orders' exact weights and tilts at wi (the entries of
+    /// `rgb_order_list`), from which `rgb_order_table` is made.
+    fn rgb_orders_exact<'a>(
+        &self,
+        b: &'a Builder,
+        powers: &PowerProgram,
+        wi: Vec3<'a>,
+        n_max: usize,
+    ) -> (Vec<Value<'a>>, Vec<Value<'a>>) {
+        let period_nm = 1000.0 * self.surface.period_um;
+        let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
+        let (lo, hi) = RGB_BAND_NM;
+        // Orders n != 0 whose centre is inside the disk for some lambda of
+        // the band: n lambda / P in (a, b).
+        let (a, bb) = (-wi[0] - half, -wi[0] + half);
+        let (a_lo, a_hi) = (a * (period_nm / lo), a * (period_nm / hi));
+        let (b_lo, b_hi) = (bb * (period_nm / lo), bb * (period_nm / hi));
+        let first = -(-a_lo.min(a_hi)).floor(); // ceil
+        let last = b_lo.max(b_hi).floor();
+        let (mut weights, mut tilts) = (Vec::new(), Vec::new());
+        for n in rgb_order_list(n_max) {
+            let zero = n == 0;
+            let nv = b.c(n as f64);
+            let in_range = if zero {
+                b.always()
+            } else {
+                nv.ge(first) & nv.le(last)
+            };
+            let (la, lb) = if zero {
+                (b.c(lo), b.c(hi))
+            } else {
+                // lambda where -wi.x - n lambda / P is within half.
+                let (p, q) = (a * (period_nm / n as f64), bb * (period_nm / n as f64));
+                (p.min(q).max(lo), p.max(q).min(hi))
+            };
+            let mass = (band_cdf(b, lb) - band_cdf(b, la)).max(0.0);
+            let mid = (la + lb) * 0.5;
+            let w = self.order_weight_program(b, powers, wi, nv, mid) * mass;
+            // Tilt of the wavelength density towards the end of the
+            // interval with the larger weight (the rim, where G grows):
+            // exp(kappa c) in the band's CDF c.
+            let kappa = if zero {
+                b.c(0.0)
+            } else {
+                let e = (lb - la) * TILT_INSET;
+                let qa = self.order_weight_program(b, powers, wi, nv, la + e);
+                let qb = self.order_weight_program(b, powers, wi, nv, lb - e);
+                let k = ((qb + 1e-30) / (qa + 1e-30))
+                    .ln()
+                    .clamp(-TILT_MAX, TILT_MAX);
+                k.finite().select(k, 0.0)
+            };
+            let take = in_range & la.lt(lb) & mass.gt(0.0);
+            weights.push(take.select(w, 0.0));
+            tilts.push(take.select(kappa, 0.0));
+        }
+        (weights, tilts)
+    }
+
+    /// The RGB order table and n_max: at the centre of each of
+    /// ORDER_CELLS_PER_AXIS^2 cells over (wi.x, wi.y) (moved onto the rim
+    /// where outside it, as the native `GratingTable`'s), the exact weights
+    /// then the tilts of `rgb_order_list`, computed by running
+    /// `rgb_orders_exact`'s program on the CPU (made once per material).
+    /// A lane reads its cell's (2 gathers per order) in place of three
+    /// order weights per order; the weights only steer the sampling.
+    fn rgb_order_table(&self) -> Option<(&[f32], usize)> {
+        let n_max = self.sampling_order_count(RGB_BAND_NM.0)? - 2;
+        let table = self.rgb_orders.get_or_init(|| {
+            let b = Builder::new();
+            let wi = [b.input(), b.input(), b.input()];
+            let powers = PowerProgram::new(&b, &self.surface);
+            let (weights, tilts) = self.rgb_orders_exact(&b, &powers, wi, n_max);
+            let outputs: Vec<Value> = weights.into_iter().chain(tilts).collect();
+            let program = b.finish(&outputs);
+            let cells = ORDER_CELLS_PER_AXIS;
+            let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
+            let mut table = Vec::with_capacity(cells * cells * outputs.len());
+            let mut regs = Vec::new();
+            let mut out = vec![0.0f64; outputs.len()];
+            for iy in 0..cells {
+                for ix in 0..cells {
+                    let wi = super::sampling::within_rim(centre(ix), centre(iy));
+                    program.run_into(&[wi.x, wi.y, wi.z], &mut regs, &mut out);
+                    table.extend(
+                        out.iter()
+                            .map(|&x| if x.is_finite() { x as f32 } else { 0.0 }),
+                    );
+                }
+            }
+            Some(table)
+        });
+        table.as_deref().map(|t| (t, n_max))
     }
 
     pub(super) fn sampling_program<'a>(
@@ -285,15 +354,15 @@ impl Periodic {
         let mut below = b.c(0.0); // cumulative weight before the chosen
         let mut chosen_w = orders.weight[0];
         let mut found = t.lt(0.0);
-        let mut band = orders.band.first().copied();
+        let mut kappa = orders.tilt.first().copied();
         for (i, (&n, &w)) in orders.n.iter().zip(&orders.weight).enumerate() {
             let next = acc + w;
             let here = !found & t.lt(next) & w.gt(0.0);
             chosen = here.select(n, chosen);
             below = here.select(acc, below);
             chosen_w = here.select(w, chosen_w);
-            if let (Some(bd), Some(cur)) = (orders.band.get(i), band.as_mut()) {
-                *cur = std::array::from_fn(|k| here.select(bd[k], cur[k]));
+            if let (Some(&k), Some(cur)) = (orders.tilt.get(i), kappa.as_mut()) {
+                *cur = here.select(k, *cur);
             }
             found = found | here;
             acc = next;
@@ -311,7 +380,7 @@ impl Periodic {
                 (chosen * lambda * (1.0 / period_nm) + sigma * g1, sigma * g2)
             }
             None => {
-                let [_, kappa] = band.expect("RGB orders carry their bands");
+                let kappa = kappa.expect("RGB orders carry their tilts");
                 let small = kappa.abs().lt(1e-3);
                 let kk = small.select(1.0, kappa);
                 let tilted = ((kk.exp() - 1.0) * r + 1.0).ln() / kk;
@@ -374,29 +443,31 @@ impl Periodic {
             }
             None => {
                 let zero = zero_order_nodes();
-                for (((&n, &w), bd), &is_zero) in orders
+                for (((&n, &w), &kappa), &is_zero) in orders
                     .n
                     .iter()
                     .zip(&orders.weight)
-                    .zip(&orders.band)
+                    .zip(&orders.tilt)
                     .zip(&orders.zero)
                 {
                     if !is_zero {
                         // lambda on this order's rainbow at u (w = 0 where
-                        // the order is not taken, n = 0 among them).
-                        let [_, kappa] = *bd;
-                        let nn = n.eq(0.0).select(1.0, n);
-                        let lambda = u * period_nm / nn;
-                        let small = kappa.abs().lt(1e-3);
-                        let kk = small.select(1.0, kappa);
-                        let c = band_cdf(b, lambda);
-                        let tilt = small.select(1.0, kk * (kk * c).exp() / (kk.exp() - 1.0));
-                        let rho = band_density_program(b, lambda);
-                        let sigma = self.sigma(lambda.max(1.0));
-                        let nv =
-                            (-(v * v) / (sigma * sigma * 2.0)).exp() / (sigma * (2.0 * PI).sqrt());
-                        let term = w * rho * tilt * (period_nm / nn.abs()) * nv;
-                        lobe = lobe + w.gt(0.0).select(term, 0.0);
+                        // the order is not taken, n = 0 among them), only
+                        // where some lane takes it.
+                        let [term] = b.region(w.gt(0.0), || {
+                            let nn = n.eq(0.0).select(1.0, n);
+                            let lambda = u * period_nm / nn;
+                            let small = kappa.abs().lt(1e-3);
+                            let kk = small.select(1.0, kappa);
+                            let c = band_cdf(b, lambda);
+                            let tilt = small.select(1.0, kk * (kk * c).exp() / (kk.exp() - 1.0));
+                            let rho = band_density_program(b, lambda);
+                            let sigma = self.sigma(lambda.max(1.0));
+                            let nv = (-(v * v) / (sigma * sigma * 2.0)).exp()
+                                / (sigma * (2.0 * PI).sqrt());
+                            [w * rho * tilt * (period_nm / nn.abs()) * nv]
+                        });
+                        lobe = lobe + term;
                     } else {
                         // Order 0: the nodes' Gaussians.
                         let rho2 = u * u + v * v;
@@ -487,4 +558,11 @@ fn zero_order_node<'a>(b: &'a Builder, r: Value<'a>) -> Value<'a> {
         lambda = r.ge(acc).select(pair[1].0, lambda);
     }
     lambda
+}
+
+/// The RGB entries: orders -n_max..=n_max but 0, then order 0 (the mirror
+/// lobe).
+fn rgb_order_list(n_max: usize) -> Vec<i64> {
+    let n = n_max as i64;
+    (-n..=n).filter(|&k| k != 0).chain([0]).collect()
 }

@@ -569,7 +569,7 @@ fn rim_direction(wi: DVec3, u_n: f64) -> DVec3 {
 
 /// The direction over (x, y), moved radially onto the rim (cosine
 /// GRATING_RIM_COS) when it lies beyond it.
-fn within_rim(mut x: f64, mut y: f64) -> DVec3 {
+pub(super) fn within_rim(mut x: f64, mut y: f64) -> DVec3 {
     let (r, r_max) = (
         (x * x + y * y).sqrt(),
         (1.0 - GRATING_RIM_COS.powi(2)).sqrt(),
