@@ -180,8 +180,6 @@ impl Periodic {
         wi: Vec3<'a>,
         lambda: Option<Value<'a>>,
     ) -> Option<Orders<'a>> {
-        let period_nm = 1000.0 * self.surface.period_um;
-        let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
         let mut out = Orders {
             n: Vec::new(),
             weight: Vec::new(),
@@ -193,16 +191,16 @@ impl Periodic {
             Some(lambda) => {
                 let count = self.sampling_order_count(crate::spectrum::LAMBDA_MIN_NM)?;
                 // Centres inside the disk: |-wi.x - n du| < half.
-                let du = lambda * (1.0 / period_nm);
+                let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
+                let du = lambda * (1.0 / (1000.0 * self.surface.period_um));
                 let first = -((wi[0] + half) / du).floor(); // ceil((-wi.x - half) / du)
                 let last = ((half - wi[0]) / du).floor();
                 for i in 0..count {
                     let n = first + i as f64;
+                    // (A select, not a region: nearly every order is
+                    // inside the disk somewhere in a packet.)
                     let take = n.le(last);
-                    // Only where some lane's centre is inside the disk.
-                    let [w] = b.region(take, || {
-                        [self.order_weight_program(b, powers, wi, n, lambda)]
-                    });
+                    let w = take.select(self.order_weight_program(b, powers, wi, n, lambda), 0.0);
                     out.total = out.total + w;
                     out.n.push(n);
                     out.weight.push(w);
