@@ -322,6 +322,15 @@ impl RgbPlan {
     }
 }
 
+impl Periodic {
+    /// Whether the material has an RGB eval program (at most
+    /// MAX_RGB_ORDERS narrow orders unrolled for its built period); its RGB
+    /// sampling programs exist only then (the JIT path needs all of them).
+    pub(super) fn has_rgb_program(&self) -> bool {
+        RgbPlan::new(&self.surface, 1.0).is_some()
+    }
+}
+
 /// F^2 at the pair's cosine: one value for wavelength-flat terms, tables
 /// for metals.
 enum Reflectance<'a> {

@@ -209,7 +209,12 @@ impl Periodic {
             None => {
                 // The exact weights and tilts at the centre of wi's cell
                 // (`rgb_order_table`): sample and pdf read the same ones,
-                // so the density stays exact for them.
+                // so the density stays exact for them. Not for a material
+                // without an RGB eval program (whose table, for periods
+                // beyond ~20 um, would take seconds to make and be unused).
+                if !self.has_rgb_program() {
+                    return None;
+                }
                 let (table, n_max) = self.rgb_order_table()?;
                 let entries = 2 * n_max + 1;
                 let cells = ORDER_CELLS_PER_AXIS as f64;

@@ -797,3 +797,39 @@ fn conserving_rgb_matches_native() {
         }
     }
 }
+
+/// A grating whose RGB eval would unroll more than MAX_RGB_ORDERS orders
+/// has no RGB eval program, so the JIT path cannot render it in RGB: its RGB
+/// sampling programs are the cosine fallback, without the order table
+/// (which would take about a second to make for such periods and be
+/// unused); its spectral programs are all there. Within the limit the RGB
+/// sampling programs read the table.
+#[test]
+fn rgb_order_table_only_with_an_rgb_eval() {
+    use crate::program::Op;
+    let gathers = |brdf: &Brdf, kind| {
+        let p = exported(brdf, kind).unwrap();
+        p.code.iter().filter(|i| i.op == Op::Gather).count()
+    };
+    for (period_um, has_rgb) in [(1.6, true), (60.0, false)] {
+        let json = format!(
+            r#"{{"surface": "periodic", "period_um": {period_um}, "profile": "sine", "height_um": 0.2, "coherence_um": 100, "energy": "stam"}}"#
+        );
+        let brdf = Brdf::from_json(&json).unwrap();
+        assert_eq!(brdf.program(ProgramKind::EvalRgb).is_some(), has_rgb);
+        for kind in [ProgramKind::PdfRgb, ProgramKind::SampleRgb] {
+            assert_eq!(
+                gathers(&brdf, kind) > 0,
+                has_rgb,
+                "{kind:?} at {period_um} um"
+            );
+        }
+        for kind in [
+            ProgramKind::EvalSpectral,
+            ProgramKind::PdfSpectral,
+            ProgramKind::SampleSpectral,
+        ] {
+            assert!(brdf.program(kind).is_some(), "{kind:?} at {period_um} um");
+        }
+    }
+}
