@@ -625,18 +625,17 @@ def run_program(program, inputs, params=None):
     def f64(v):
         return np.asarray(v, dtype=np.float64)
 
-    # The open regions' masks, and where all of them hold.
-    masks, inside = [], None
+    # Per open region: where it and every region around it hold.
+    masks = []
     with np.errstate(all='ignore'):
         for op, a, b, c in p.code:
             name = PROGRAM_OPS[op]
             r = regs
             if name in ('If', 'EndIf'):
                 if name == 'If':
-                    masks.append(r[a] if inside is None else inside & r[a])
+                    masks.append(masks[-1] & r[a] if masks else r[a])
                 else:
                     masks.pop()
-                inside = masks[-1] if masks else None
                 regs.append(np.zeros((), f32))
                 continue
             if name == 'Input':
@@ -702,8 +701,8 @@ def run_program(program, inputs, params=None):
                 i = np.asarray(r[b], dtype=np.float64)
                 i = np.where(np.isnan(i), 0.0, np.clip(i, 0.0, max(len(t), 1) - 1))
                 v = t[i.astype(np.int64)] if len(t) else np.zeros(i.shape, f32)
-            if inside is not None:
-                v = np.where(inside, v, False if op in _GIVES_MASK else 0.0)
+            if masks:
+                v = np.where(masks[-1], v, False if op in _GIVES_MASK else 0.0)
             regs.append(np.asarray(v, dtype=bool if op in _GIVES_MASK else f32))
             for r in dead_after.get(len(regs) - 1, ()):
                 regs[r] = None

@@ -10,8 +10,9 @@
 //! `Builder::region`) runs only on the lanes that need it, so that a
 //! renderer skips the SIMD packets or warps none of whose lanes does. A
 //! model writes its program with [`Builder`], whose values overload the
-//! arithmetic operators, so that the code reads as the formula. This module knows no model: models and the material build
-//! their programs on it, the ABI exports them ([`Program::encode`]), the
+//! arithmetic operators, so that the code reads as the formula. This
+//! module knows no model: models and the material build their programs on
+//! it, the ABI exports them ([`Program::encode`]), the
 //! plugin executes them with Dr.Jit, and [`Program::run`] executes them on
 //! the CPU, so that tests compare a program against the native path.
 

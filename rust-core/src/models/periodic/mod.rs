@@ -86,7 +86,7 @@ pub struct Periodic {
     grating: OnceLock<Option<sampling::GratingTable>>,
     /// The RGB sampling programs' order weights and tilts over the
     /// incident direction (program_sampling.rs), made on the first build.
-    rgb_orders: OnceLock<Option<Vec<f32>>>,
+    rgb_orders: OnceLock<Vec<f32>>,
 }
 
 impl Periodic {

@@ -209,12 +209,7 @@ impl Periodic {
             None => {
                 // The exact weights and tilts at the centre of wi's cell
                 // (`rgb_order_table`): sample and pdf read the same ones,
-                // so the density stays exact for them. Not for a material
-                // without an RGB eval program (whose table, for periods
-                // beyond ~20 um, would take seconds to make and be unused).
-                if !self.has_rgb_program() {
-                    return None;
-                }
+                // so the density stays exact for them.
                 let (table, n_max) = self.rgb_order_table()?;
                 let entries = 2 * n_max + 1;
                 let cells = ORDER_CELLS_PER_AXIS as f64;
@@ -305,8 +300,14 @@ impl Periodic {
     /// then the tilts of `rgb_order_list`, computed by running
     /// `rgb_orders_exact`'s program on the CPU (made once per material).
     /// A lane reads its cell's (2 gathers per order) in place of three
-    /// order weights per order; the weights only steer the sampling.
+    /// order weights per order; the weights only steer the sampling. None
+    /// for a material without an RGB eval program, which the JIT path
+    /// cannot render in RGB (periods beyond ~20 um: the table would take
+    /// about a second to make and be unused).
     fn rgb_order_table(&self) -> Option<(&[f32], usize)> {
+        if !self.has_rgb_program() {
+            return None;
+        }
         let n_max = self.sampling_order_count(RGB_BAND_NM.0)? - 2;
         let table = self.rgb_orders.get_or_init(|| {
             let b = Builder::new();
@@ -330,9 +331,9 @@ impl Periodic {
                     );
                 }
             }
-            Some(table)
+            table
         });
-        table.as_deref().map(|t| (t, n_max))
+        Some((table, n_max))
     }
 
     pub(super) fn sampling_program<'a>(
