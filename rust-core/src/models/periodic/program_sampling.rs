@@ -463,10 +463,14 @@ impl Periodic {
                     if !is_zero {
                         // lambda on this order's rainbow at u (w = 0 where
                         // the order is not taken, n = 0 among them), only
-                        // where some lane takes it.
-                        let [term] = b.region(w.gt(0.0), || {
-                            let nn = n.eq(0.0).select(1.0, n);
-                            let lambda = u * period_nm / nn;
+                        // where some lane takes it and lambda is inside the
+                        // band (outside, the band density is 0: most
+                        // orders at a given wo).
+                        let nn = n.eq(0.0).select(1.0, n);
+                        let lambda = u * period_nm / nn;
+                        let (lo, hi) = RGB_BAND_NM;
+                        let on_band = lambda.gt(lo) & lambda.lt(hi);
+                        let [term] = b.region(w.gt(0.0) & on_band, || {
                             let small = kappa.abs().lt(1e-3);
                             let kk = small.select(1.0, kappa);
                             let c = band_cdf(b, lambda);
