@@ -102,6 +102,9 @@ pub struct EnergyTable {
 
 /// Most wavelength nodes of a table.
 pub const MAX_NODES: usize = 32;
+/// Levels of m in a per-wavelength table (m in [0, 1] to 2.4e-4): those
+/// of a packed pair (`lookup::pack_pair`).
+const PACK_LEVELS: f64 = lookup::PAIR_LEVELS;
 
 /// m(wi, lambda) m(wo, lambda) times the horizon taper of one pair, at any
 /// wavelength (linear between the table's nodes). The products at every
@@ -255,8 +258,38 @@ impl EnergyTable {
                 .collect();
             table.m = m;
             table.nodes = 1;
+        } else {
+            // Per-wavelength tables hold m on a grid of 1 / PACK_LEVELS,
+            // rounded down (the albedo bound holds): a program reads two
+            // nodes with one gather (`packed_pairs`), the native path the
+            // same values.
+            for m in &mut table.m {
+                *m = (*m * PACK_LEVELS).floor() / PACK_LEVELS;
+            }
         }
         table
+    }
+
+    /// m at the cell centres and nodes, [cell][node], and the nodes per
+    /// cell.
+    #[cfg(test)]
+    pub(super) fn values(&self) -> (&[f64], usize) {
+        (&self.m, self.nodes)
+    }
+
+    /// Two nodes' m per value, for programs (`lookup::pack_pair`, exact
+    /// for the table's levels): nodes 2p and 2p + 1 (0 past the last). Per
+    /// cell ceil(nodes / 2) values.
+    pub(super) fn packed_pairs(&self) -> Vec<f32> {
+        let pairs = self.nodes.div_ceil(2);
+        self.m
+            .chunks(self.nodes)
+            .flat_map(|row| {
+                (0..pairs).map(move |p| {
+                    lookup::pack_pair(row[2 * p], row.get(2 * p + 1).map_or(0.0, |&m| m))
+                })
+            })
+            .collect()
     }
 
     /// The pair's factors, looked up when first asked for.
@@ -511,6 +544,7 @@ impl EnergyTable {
             table: self,
             b,
             m: b.table(f32s(&self.m)),
+            packed: OnceCell::new(),
             terms: derivatives
                 .iter()
                 .map(|d| {
@@ -527,6 +561,8 @@ pub struct TableProgram<'a> {
     table: &'a EnergyTable,
     b: &'a Builder,
     m: Table,
+    /// `EnergyTable::packed_pairs`, made where first read.
+    packed: OnceCell<Table>,
     /// Per derivative: ln(p / p0) and the table of d m / d ln p.
     terms: Vec<(Value<'a>, Table)>,
 }
@@ -606,18 +642,48 @@ impl<'a> TableProgram<'a> {
     /// The pair's factor at every wavelength node, for programs that need
     /// it at many wavelengths (a grating's RGB: three per order, and the
     /// broad rule's nodes): the table's rows around wi and wo gathered once
-    /// (8 gathers per node, times one plus the number of derivatives),
-    /// then linear in lambda by selects.
+    /// (8 gathers per pair of nodes from the packed table; without it, as
+    /// along derivatives, 8 per node times one plus their number), then
+    /// linear in lambda by selects.
     pub fn pair_factor(&self, wi: Vec3<'a>, wo: Vec3<'a>) -> PairFactorProgram<'a> {
         let (t, b) = (self.table, self.b);
-        let (ci, co) = (t.corners_program(b, wi), t.corners_program(b, wo));
         let taper = t.taper_program(wi[2]) * t.taper_program(wo[2]);
-        let product: Vec<Value<'a>> = (0..t.nodes)
-            .map(|q| {
-                let q = b.c(q as f64);
-                self.at_corners(&ci, q) * self.at_corners(&co, q) * taper
-            })
-            .collect();
+        let product: Vec<Value<'a>> = if self.terms.is_empty() && t.nodes > 1 {
+            // Two nodes per gather (`EnergyTable::packed_pairs`): a gather
+            // costs several times the unpacking, more so on CPUs whose
+            // vector gathers are slow.
+            let packed = *self.packed.get_or_init(|| b.table(t.packed_pairs()));
+            let pairs = t.nodes.div_ceil(2) as f64;
+            let rows = |d: Vec3<'a>| {
+                t.corner_cells_program(b, d)
+                    .map(|(cell, w)| (cell * pairs, w * (1.0 / PACK_LEVELS)))
+            };
+            let (ri, ro) = (rows(wi), rows(wo));
+            let at_pair = |corners: &[(Value<'a>, Value<'a>); 4], p: f64| {
+                let (mut even, mut odd) = (b.c(0.0), b.c(0.0));
+                for &(row, w) in corners {
+                    let (first, second) = lookup::unpack_pair_levels(b.gather(packed, row + p));
+                    even = w.fma(first, even);
+                    odd = w.fma(second, odd);
+                }
+                (even, odd)
+            };
+            (0..t.nodes.div_ceil(2))
+                .flat_map(|p| {
+                    let ((ie, io), (oe, oo)) = (at_pair(&ri, p as f64), at_pair(&ro, p as f64));
+                    [ie * oe * taper, io * oo * taper]
+                })
+                .take(t.nodes)
+                .collect()
+        } else {
+            let (ci, co) = (t.corners_program(b, wi), t.corners_program(b, wo));
+            (0..t.nodes)
+                .map(|q| {
+                    let q = b.c(q as f64);
+                    self.at_corners(&ci, q) * self.at_corners(&co, q) * taper
+                })
+                .collect()
+        };
         // Per segment q: the slope d_q and the intercept product_q - q d_q.
         let slope: Vec<Value<'a>> = product.windows(2).map(|p| p[1] - p[0]).collect();
         let intercept = product
@@ -642,6 +708,14 @@ impl EnergyTable {
     /// `corners`): each as the table index of its node 0, and its bilinear
     /// weight.
     fn corners_program<'a>(&self, b: &'a Builder, d: Vec3<'a>) -> [(Value<'a>, Value<'a>); 4] {
+        let k = self.nodes as f64;
+        self.corner_cells_program(b, d)
+            .map(|(cell, w)| (cell * k, w))
+    }
+
+    /// The four cells around a unit direction above the horizon: each as
+    /// its index (row times columns plus column) and its bilinear weight.
+    fn corner_cells_program<'a>(&self, b: &'a Builder, d: Vec3<'a>) -> [(Value<'a>, Value<'a>); 4] {
         let r = self.radial as f64;
         let x = d[2].clamp(0.0, 1.0).sqrt() * r - 0.5;
         let i0 = x.max(0.0).floor().min(r - 1.0);
@@ -657,14 +731,13 @@ impl EnergyTable {
             let j1 = (j0 + 1.0).ge(n).select(0.0, j0 + 1.0);
             (j0, j1, (y - j0).clamp(0.0, 1.0))
         };
-        let k = self.nodes as f64;
         [
             (i0, j0, (1.0 - fi) * (1.0 - fj)),
             (i0, j1, (1.0 - fi) * fj),
             (i1, j0, fi * (1.0 - fj)),
             (i1, j1, fi * fj),
         ]
-        .map(|(i, j, w)| ((i * n + j) * k, w))
+        .map(|(i, j, w)| (i * n + j, w))
     }
 
     /// The horizon taper at a cosine.

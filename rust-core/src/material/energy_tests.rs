@@ -271,6 +271,45 @@ fn energy_table_program_matches_native() {
     }
 }
 
+/// A grating's table holds m on the grid of 1 / PACK_LEVELS within [0, 1],
+/// and its packed copy (two nodes per f32, what the RGB programs gather)
+/// decodes in f32 to exactly those levels.
+#[test]
+fn packed_pairs_hold_the_table_exactly() {
+    use crate::program::lookup::PAIR_LEVELS as PACK_LEVELS;
+    let brdf = Brdf::from_json(MATERIALS[0]).unwrap();
+    let table = brdf.energy_table().unwrap();
+    let (m, nodes) = table.values();
+    assert!(nodes > 1 && !table.colour_neutral());
+    assert!(
+        m.iter().any(|&x| x < 1.0),
+        "a grating's table scales somewhere"
+    );
+    for &x in m {
+        let level = x * PACK_LEVELS;
+        assert!(
+            (0.0..=1.0).contains(&x) && (level - level.round()).abs() < 1e-9,
+            "{x}"
+        );
+    }
+    let packed = table.packed_pairs();
+    let pairs = nodes.div_ceil(2);
+    assert_eq!(packed.len(), m.len() / nodes * pairs);
+    for (cell, row) in m.chunks(nodes).enumerate() {
+        for p in 0..pairs {
+            // Decoded in f32, as a program does.
+            let v = packed[cell * pairs + p];
+            let hi = v.floor();
+            let lo = (v - hi) * 4096.0;
+            assert_eq!(hi as f64, (row[2 * p] * PACK_LEVELS).round());
+            let want = row
+                .get(2 * p + 1)
+                .map_or(0.0, |&x| (x * PACK_LEVELS).round());
+            assert_eq!(lo as f64, want, "cell {cell} pair {p}");
+        }
+    }
+}
+
 /// At moderate angles (cos_i and cos_o at least 0.5) the conserving
 /// Gaussian and fractal surfaces keep Stam's f within 2% (the issue's
 /// bound; docs/energy.md): their albedo there is at most about 1, so only

@@ -71,3 +71,27 @@ pub fn select_chain<'a>(b: &'a Builder, values: &[f64], i: Value<'a>) -> Value<'
     }
     out
 }
+
+/// Levels of a value in [0, 1] in a packed pair (`pack_pair`): 12 bits,
+/// steps of 1 / 4095 (2.4e-4).
+pub const PAIR_LEVELS: f64 = 4095.0;
+/// A packed pair's second value per level, in its fraction.
+const PAIR_FRACTION: f64 = 4096.0;
+
+/// Two values in [0, 1] as one table entry, each on the grid of
+/// 1 / PAIR_LEVELS (rounded; clamped into [0, 1]): the first's level in
+/// the integer part, the second's in the fraction, 12 bits each, so that
+/// the pair is exact in an f32's 24-bit significand. A program reads both
+/// with one gather (`unpack_pair`): a gather costs several arithmetic
+/// operations, more on CPUs whose vector gathers are slow.
+pub fn pack_pair(first: f64, second: f64) -> f32 {
+    let level = |x: f64| (x.clamp(0.0, 1.0) * PAIR_LEVELS).round();
+    (level(first) + level(second) / PAIR_FRACTION) as f32
+}
+
+/// The two levels of a packed entry (`pack_pair`), each times PAIR_LEVELS:
+/// exact, as the program runs in f32.
+pub fn unpack_pair_levels<'a>(entry: Value<'a>) -> (Value<'a>, Value<'a>) {
+    let first = entry.floor();
+    (first, (entry - first) * PAIR_FRACTION)
+}
