@@ -25,14 +25,7 @@ use stam::Brdf;
 use std::f64::consts::PI;
 use std::time::Instant;
 
-use stam::benchmark::SplitMix64 as Rng;
-
-fn mean_var(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
-    (mean, var)
-}
+use stam::benchmark::{mean_var, SplitMix64 as Rng};
 
 /// The material's sampling programs for one mode.
 struct JitSampler {

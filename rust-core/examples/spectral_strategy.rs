@@ -5,55 +5,92 @@
 //!
 //! The JIT path's spectral pdf is the mean of four strategies, one per path
 //! wavelength (the sample draws with one of them), which is most of the
-//! spectral Gaussians' render time. Per material and incidence:
-//! - one wavelength lambda (400, 550, 700 nm): Var of f(lambda) cos / pdf with
-//!   the SAMPLE/PDF programs at lambda and at fixed wavelengths, relative to
-//!   the core's strategy at lambda;
-//! - a path's four stratified wavelengths (the sum of their estimates):
-//!   Var with the strategy at one fixed wavelength, at a mixture of two fixed
-//!   ones, and at the first path wavelength alone, relative to the
-//!   four-wavelength mixture the plugin runs.
+//! spectral Gaussians' render time. Every strategy here is such a mixture
+//! over a list of wavelengths (the SAMPLE, PDF and COHERENT programs run in
+//! f32 at each), and the estimate of f cos / pdf (the coherent lobe: its
+//! reflectance over its probability) is scored per material and incidence:
+//! - at one wavelength lambda (400, 550, 700 nm): the strategy at lambda and
+//!   at fixed wavelengths, Var relative to the core's strategy at lambda;
+//! - over a path's four stratified wavelengths (the sum of their
+//!   estimates): one fixed wavelength, two fixed ones, and the first path
+//!   wavelength alone, Var relative to the four-wavelength mixture the
+//!   plugin runs.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 use glam::DVec3;
-use stam::benchmark::SplitMix64 as Rng;
+use stam::benchmark::{mean_var, SplitMix64 as Rng};
 use stam::material::program::ProgramKind;
 use stam::program::Program;
 use stam::Brdf;
 
-fn mean_var(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len() as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
-    (mean, var)
-}
-
-struct J {
+/// The material's spectral sampling programs.
+struct Programs {
     sample: Program,
     pdf: Program,
     coherent: Program,
 }
-impl J {
-    fn pdf(&self, wi: DVec3, wo: DVec3, l: f64) -> f64 {
-        let p: Vec<f32> = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, l]
-            .iter()
-            .map(|&v| v as f32)
-            .collect();
-        self.pdf.run(&p)[0] as f64
+
+fn f32s(values: &[f64]) -> Vec<f32> {
+    values.iter().map(|&v| v as f32).collect()
+}
+
+impl Programs {
+    fn new(brdf: &Brdf) -> Programs {
+        let get = |kind| brdf.program(kind).expect("a Gaussian has every program");
+        Programs {
+            sample: get(ProgramKind::SampleSpectral),
+            pdf: get(ProgramKind::PdfSpectral),
+            coherent: get(ProgramKind::CoherentSpectral),
+        }
     }
-    fn pcoh(&self, wi: DVec3, l: f64) -> f64 {
-        let c: Vec<f32> = [wi.x, wi.y, wi.z, l].iter().map(|&v| v as f32).collect();
-        *self.coherent.run(&c).last().unwrap() as f64
-    }
-    fn draw(&self, wi: DVec3, l: f64, u: [f64; 3]) -> (DVec3, bool) {
-        let x: Vec<f32> = [wi.x, wi.y, wi.z, u[0], u[1], u[2], l]
+
+    /// One sample of the mixture of the strategies at `strategy` (picked
+    /// by u[0]), scored for the wavelengths `lambdas`.
+    fn estimate(
+        &self,
+        brdf: &Brdf,
+        wi: DVec3,
+        strategy: &[f64],
+        lambdas: &[f64],
+        u: [f64; 3],
+    ) -> f64 {
+        let n = strategy.len() as f64;
+        let k = ((u[0] * n) as usize).min(strategy.len() - 1);
+        let u0 = u[0] * n - k as f64;
+        let o = self
+            .sample
+            .run(&f32s(&[wi.x, wi.y, wi.z, u0, u[1], u[2], strategy[k]]));
+        let wo = DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64);
+        let mean = |f: &dyn Fn(f64) -> f64| strategy.iter().map(|&l| f(l)).sum::<f64>() / n;
+        if o[3] > 0.5 {
+            let p = mean(&|l| {
+                *self
+                    .coherent
+                    .run(&f32s(&[wi.x, wi.y, wi.z, l]))
+                    .last()
+                    .unwrap() as f64
+            });
+            return lambdas
+                .iter()
+                .map(|&l| brdf.coherent_spectral(wi, l))
+                .sum::<f64>()
+                / p;
+        }
+        if !(wo.z > 0.0) {
+            return 0.0;
+        }
+        let p = mean(&|l| {
+            self.pdf
+                .run(&f32s(&[wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, l]))[0] as f64
+        });
+        if !(p > 0.0) {
+            return 0.0;
+        }
+        lambdas
             .iter()
-            .map(|&v| v as f32)
-            .collect();
-        let o = self.sample.run(&x);
-        (
-            DVec3::new(o[0] as f64, o[1] as f64, o[2] as f64),
-            o[3] > 0.5,
-        )
+            .map(|&l| brdf.eval_spectral(wi, wo, l))
+            .sum::<f64>()
+            * wo.z
+            / p
     }
 }
 
@@ -79,6 +116,7 @@ fn main() {
             "anisotropic",
             r#"{"surface":"gaussian","sigma_um":0.08,"corr_x_um":2,"corr_y_um":10,"fresnel":0.9}"#,
         ),
+        // bench_render.py's two Gaussians.
         (
             "bench smooth",
             r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":2,"fresnel":0.9}"#,
@@ -89,206 +127,75 @@ fn main() {
         ),
     ];
     let fixed = [550.0, 600.0, 650.0, 700.0];
+    let pairs = [
+        [450.0, 650.0],
+        [480.0, 620.0],
+        [500.0, 650.0],
+        [450.0, 600.0],
+    ];
+    println!(
+        "{n} samples per estimate; Var relative to the core at lambda, or to the path's mixture"
+    );
     for (name, json) in materials {
-        let brdf = Brdf::from_json(json).unwrap();
-        let j = J {
-            sample: brdf.program(ProgramKind::SampleSpectral).unwrap(),
-            pdf: brdf.program(ProgramKind::PdfSpectral).unwrap(),
-            coherent: brdf.program(ProgramKind::CoherentSpectral).unwrap(),
-        };
+        let brdf = Brdf::from_json(json).expect("material");
+        let programs = Programs::new(&brdf);
         for deg in [0.0f64, 30.0, 70.0, 0.08f64.acos().to_degrees()] {
             let th = deg.to_radians();
             let wi = DVec3::new(th.sin() * 0.8, th.sin() * 0.6, th.cos());
-            // Per wavelength: core, JIT at lambda, JIT with the strategy at fixed.
-            let mut line = format!("{name} {deg:.0}deg:");
-            for l in [400.0, 550.0, 700.0] {
-                let coh = brdf.coherent_spectral(wi, l);
+            let mut line = format!("{name} {deg:.0} deg, one wavelength:");
+            for lambda in [400.0, 550.0, 700.0] {
+                let coherent = brdf.coherent_spectral(wi, lambda);
                 let mut rng = Rng(7);
                 let core: Vec<f64> = (0..n)
                     .map(|_| {
-                        let s = brdf.sample(wi, Some(l), rng.three());
+                        let s = brdf.sample(wi, Some(lambda), rng.three());
                         if s.pdf == 0.0 {
                             0.0
                         } else if s.coherent {
-                            coh / s.pdf
+                            coherent / s.pdf
                         } else {
-                            brdf.eval_spectral(wi, s.wo, l) * s.wo.z / s.pdf
+                            brdf.eval_spectral(wi, s.wo, lambda) * s.wo.z / s.pdf
                         }
                     })
                     .collect();
-                let (_, vc) = mean_var(&core);
-                line += &format!(" | {l}: core {vc:.2e}");
-                for ls in std::iter::once(l).chain(fixed) {
+                let (_, v_core) = mean_var(&core);
+                line += &format!(" | {lambda} nm:");
+                for at in std::iter::once(lambda).chain(fixed) {
                     let xs: Vec<f64> = (0..n)
-                        .map(|_| {
-                            let (wo, c) = j.draw(wi, ls, rng.three());
-                            if c {
-                                return coh / j.pcoh(wi, ls);
-                            }
-                            if !(wo.z > 0.0) {
-                                return 0.0;
-                            }
-                            let p = j.pdf(wi, wo, ls);
-                            if !(p > 0.0) {
-                                0.0
-                            } else {
-                                brdf.eval_spectral(wi, wo, l) * wo.z / p
-                            }
-                        })
+                        .map(|_| programs.estimate(&brdf, wi, &[at], &[lambda], rng.three()))
                         .collect();
-                    let (_, v) = mean_var(&xs);
-                    line += &format!(" {:.0}:{:.2}", ls, v / vc);
+                    line += &format!(" at {at:.0} {:.2}", mean_var(&xs).1 / v_core);
                 }
             }
             println!("{line}");
-            // Path: 4 stratified wavelengths; mixture vs fixed.
-            let mut rng = Rng(11);
-            let mut mix = Vec::new();
-            let mut fx: Vec<Vec<f64>> = vec![Vec::new(); fixed.len()];
-            let mut corev = Vec::new();
-            for _ in 0..n {
-                let l0 = 380.0 + 400.0 * rng.next_f64();
-                let ls: Vec<f64> = (0..4)
-                    .map(|k| 380.0 + (l0 - 380.0 + 100.0 * k as f64) % 400.0)
-                    .collect();
-                let u = rng.three();
-                // mixture
-                let k = ((u[0] * 4.0) as usize).min(3);
-                let u0 = u[0] * 4.0 - k as f64;
-                let (wo, c) = j.draw(wi, ls[k], [u0, u[1], u[2]]);
-                let est = if c {
-                    let p: f64 = ls.iter().map(|&x| j.pcoh(wi, x)).sum::<f64>() / 4.0;
-                    ls.iter()
-                        .map(|&x| brdf.coherent_spectral(wi, x))
-                        .sum::<f64>()
-                        / p
-                } else if wo.z > 0.0 {
-                    let p: f64 = ls.iter().map(|&x| j.pdf(wi, wo, x)).sum::<f64>() / 4.0;
-                    if p > 0.0 {
-                        ls.iter()
-                            .map(|&x| brdf.eval_spectral(wi, wo, x))
-                            .sum::<f64>()
-                            * wo.z
-                            / p
-                    } else {
-                        0.0
-                    }
-                } else {
-                    0.0
-                };
-                mix.push(est);
-                // core sampling at hero, its own mixture? use core at each own lambda (ideal per-lambda)
-                let mut s = 0.0;
-                for &x in &ls {
-                    let sm = brdf.sample(wi, Some(x), rng.three());
-                    s += if sm.pdf == 0.0 {
-                        0.0
-                    } else if sm.coherent {
-                        brdf.coherent_spectral(wi, x) / sm.pdf
-                    } else {
-                        brdf.eval_spectral(wi, sm.wo, x) * sm.wo.z / sm.pdf
-                    };
-                }
-                corev.push(s);
-                for (fi, &lf) in fixed.iter().enumerate() {
-                    let (wo, c) = j.draw(wi, lf, u);
-                    let est = if c {
-                        ls.iter()
-                            .map(|&x| brdf.coherent_spectral(wi, x))
-                            .sum::<f64>()
-                            / j.pcoh(wi, lf)
-                    } else if wo.z > 0.0 {
-                        let p = j.pdf(wi, wo, lf);
-                        if p > 0.0 {
-                            ls.iter()
-                                .map(|&x| brdf.eval_spectral(wi, wo, x))
-                                .sum::<f64>()
-                                * wo.z
-                                / p
-                        } else {
-                            0.0
-                        }
-                    } else {
-                        0.0
-                    };
-                    fx[fi].push(est);
-                }
-            }
-            let pairs = [
-                (450.0, 650.0),
-                (480.0, 620.0),
-                (500.0, 650.0),
-                (450.0, 600.0),
-            ];
-            let mut pv: Vec<Vec<f64>> = vec![Vec::new(); pairs.len() + 1];
+            // A path's four wavelengths: the hero uniform over the band, the
+            // others 100 nm apart (wrapped), as Mitsuba's spectral sampling.
+            let mut strategies: Vec<(String, Vec<f64>)> = vec![("mixture".into(), vec![])];
+            strategies.extend(fixed.map(|l| (format!("{l:.0}"), vec![l])));
+            strategies.extend(pairs.map(|[a, b]| (format!("{a:.0}+{b:.0}"), vec![a, b])));
+            strategies.push(("hero".into(), vec![]));
+            let mut scores = vec![Vec::with_capacity(n); strategies.len()];
             let mut rng = Rng(11);
             for _ in 0..n {
                 let l0 = 380.0 + 400.0 * rng.next_f64();
-                let ls: Vec<f64> = (0..4)
+                let path: Vec<f64> = (0..4)
                     .map(|k| 380.0 + (l0 - 380.0 + 100.0 * k as f64) % 400.0)
                     .collect();
                 let u = rng.three();
-                for (pi, &(la, lb)) in pairs.iter().enumerate() {
-                    let k = if u[0] < 0.5 { 0 } else { 1 };
-                    let u0 = u[0] * 2.0 - k as f64;
-                    let (wo, c) = j.draw(wi, [la, lb][k], [u0, u[1], u[2]]);
-                    let est = if c {
-                        ls.iter()
-                            .map(|&x| brdf.coherent_spectral(wi, x))
-                            .sum::<f64>()
-                            / (0.5 * (j.pcoh(wi, la) + j.pcoh(wi, lb)))
-                    } else if wo.z > 0.0 {
-                        let p = 0.5 * (j.pdf(wi, wo, la) + j.pdf(wi, wo, lb));
-                        if p > 0.0 {
-                            ls.iter()
-                                .map(|&x| brdf.eval_spectral(wi, wo, x))
-                                .sum::<f64>()
-                                * wo.z
-                                / p
-                        } else {
-                            0.0
-                        }
-                    } else {
-                        0.0
+                for ((label, at), score) in strategies.iter().zip(&mut scores) {
+                    let at: &[f64] = match label.as_str() {
+                        "mixture" => &path,
+                        "hero" => &path[..1],
+                        _ => at,
                     };
-                    pv[pi].push(est);
+                    score.push(programs.estimate(&brdf, wi, at, &path, u));
                 }
-                let (wo, c) = j.draw(wi, ls[0], u);
-                let est = if c {
-                    ls.iter()
-                        .map(|&x| brdf.coherent_spectral(wi, x))
-                        .sum::<f64>()
-                        / j.pcoh(wi, ls[0])
-                } else if wo.z > 0.0 {
-                    let p = j.pdf(wi, wo, ls[0]);
-                    if p > 0.0 {
-                        ls.iter()
-                            .map(|&x| brdf.eval_spectral(wi, wo, x))
-                            .sum::<f64>()
-                            * wo.z
-                            / p
-                    } else {
-                        0.0
-                    }
-                } else {
-                    0.0
-                };
-                pv[pairs.len()].push(est);
             }
-            let (_, vm) = mean_var(&mix);
-            let (_, vco) = mean_var(&corev);
-            let mut line =
-                format!("   path: mixture {vm:.3e} (per-lambda core, 4 samples {vco:.3e})");
-            for (fi, &lf) in fixed.iter().enumerate() {
-                let (_, v) = mean_var(&fx[fi]);
-                line += &format!(" {lf:.0}:{:.2}", v / vm);
+            let v_mix = mean_var(&scores[0]).1;
+            let mut line = format!("   four path wavelengths: mixture Var {v_mix:.3e};");
+            for ((label, _), score) in strategies.iter().zip(&scores).skip(1) {
+                line += &format!(" {label} {:.2}", mean_var(score).1 / v_mix);
             }
-            for (pi, &(la, lb)) in pairs.iter().enumerate() {
-                let (_, v) = mean_var(&pv[pi]);
-                line += &format!(" {la:.0}+{lb:.0}:{:.2}", v / vm);
-            }
-            let (_, v) = mean_var(&pv[pairs.len()]);
-            line += &format!(" hero:{:.2}", v / vm);
             println!("{line}");
         }
     }

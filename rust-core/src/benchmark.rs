@@ -64,3 +64,11 @@ pub fn cook_torrance_beckmann(wi: DVec3, wo: DVec3, alpha: f64, eta: f64, k: f64
     let f = conductor_reflectance(wi.dot(h), eta, k);
     f * d * smith_g1(wi) * smith_g1(wo) / (4.0 * wi.z * wo.z)
 }
+
+/// Mean and unbiased variance of estimates (the sampling measurements').
+pub fn mean_var(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
+    (mean, var)
+}
