@@ -82,7 +82,7 @@ const PAIR_FRACTION: f64 = 4096.0;
 /// 1 / PAIR_LEVELS (rounded; clamped into [0, 1]): the first's level in
 /// the integer part, the second's in the fraction, 12 bits each, so that
 /// the pair is exact in an f32's 24-bit significand. A program reads both
-/// with one gather (`unpack_pair`): a gather costs several arithmetic
+/// with one gather (`unpack_pair_levels`): a gather costs several arithmetic
 /// operations, more on CPUs whose vector gathers are slow.
 pub fn pack_pair(first: f64, second: f64) -> f32 {
     let level = |x: f64| (x.clamp(0.0, 1.0) * PAIR_LEVELS).round();
