@@ -25,7 +25,7 @@ use stam::Brdf;
 use std::f64::consts::PI;
 use std::time::Instant;
 
-use stam::benchmark::{mean_var, SplitMix64 as Rng};
+use stam::benchmark::{mean_var, SplitMix64 as Rng, SAMPLING_MATERIALS};
 
 /// The material's sampling programs for one mode.
 struct JitSampler {
@@ -89,33 +89,7 @@ fn main() {
         .unwrap_or(200_000);
     // Only materials whose name contains this text (all when absent).
     let filter = std::env::args().nth(2).unwrap_or_default();
-    let materials = [
-        ("compact disc", r#"{"surface":"cd","fresnel":0.9}"#),
-        (
-            "smooth Gaussian",
-            r#"{"surface":"gaussian","sigma_um":0.02,"corr_um":5,"fresnel":0.9}"#,
-        ),
-        (
-            "medium Gaussian",
-            r#"{"surface":"gaussian","sigma_um":0.14,"corr_um":2,"fresnel":0.9}"#,
-        ),
-        (
-            "rough Gaussian",
-            r#"{"surface":"gaussian","sigma_um":0.5,"corr_um":3,"fresnel":0.9}"#,
-        ),
-        (
-            "anisotropic",
-            r#"{"surface":"gaussian","sigma_um":0.08,"corr_x_um":2,"corr_y_um":10,"fresnel":0.9}"#,
-        ),
-        (
-            "fractal H=0.7",
-            r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.05,"lag_um":1,"fresnel":0.9}"#,
-        ),
-        (
-            "fractal H=0.35",
-            r#"{"surface":"fractal","hurst":0.35,"sigma_um":0.2,"lag_um":1,"fresnel":0.9}"#,
-        ),
-    ];
+    let materials = SAMPLING_MATERIALS;
     let incidences = [
         ("30 deg", 30.0f64),
         ("70 deg", 70.0),

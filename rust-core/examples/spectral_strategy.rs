@@ -17,7 +17,7 @@
 //!   plugin runs.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 use glam::DVec3;
-use stam::benchmark::{mean_var, SplitMix64 as Rng};
+use stam::benchmark::{mean_var, SplitMix64 as Rng, SAMPLING_MATERIALS};
 use stam::material::program::ProgramKind;
 use stam::program::Program;
 use stam::Brdf;
@@ -99,33 +99,20 @@ fn main() {
         .nth(1)
         .and_then(|a| a.parse().ok())
         .unwrap_or(20000);
-    let materials = [
-        (
-            "smooth Gaussian",
-            r#"{"surface":"gaussian","sigma_um":0.02,"corr_um":5,"fresnel":0.9}"#,
-        ),
-        (
-            "medium Gaussian",
-            r#"{"surface":"gaussian","sigma_um":0.14,"corr_um":2,"fresnel":0.9}"#,
-        ),
-        (
-            "rough Gaussian",
-            r#"{"surface":"gaussian","sigma_um":0.5,"corr_um":3,"fresnel":0.9}"#,
-        ),
-        (
-            "anisotropic",
-            r#"{"surface":"gaussian","sigma_um":0.08,"corr_x_um":2,"corr_y_um":10,"fresnel":0.9}"#,
-        ),
-        // bench_render.py's two Gaussians.
-        (
-            "bench smooth",
-            r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":2,"fresnel":0.9}"#,
-        ),
-        (
-            "bench rough",
-            r#"{"surface":"gaussian","sigma_um":0.5,"corr_um":4,"fresnel":0.9}"#,
-        ),
-    ];
+    // The Gaussians of the sampling table, and bench_render.py's two.
+    let materials = SAMPLING_MATERIALS
+        .into_iter()
+        .filter(|(_, json)| json.contains("gaussian"))
+        .chain([
+            (
+                "bench smooth",
+                r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":2,"fresnel":0.9}"#,
+            ),
+            (
+                "bench rough",
+                r#"{"surface":"gaussian","sigma_um":0.5,"corr_um":4,"fresnel":0.9}"#,
+            ),
+        ]);
     let fixed = [550.0, 600.0, 650.0, 700.0];
     let pairs = [
         [450.0, 650.0],

@@ -72,3 +72,34 @@ pub fn mean_var(xs: &[f64]) -> (f64, f64) {
     let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
     (mean, var)
 }
+
+/// The sampling measurements' materials (examples sampling_variance and
+/// spectral_strategy; docs/sampling.md's tables): name and JSON, fresnel
+/// 0.9.
+pub const SAMPLING_MATERIALS: [(&str, &str); 7] = [
+    ("compact disc", r#"{"surface":"cd","fresnel":0.9}"#),
+    (
+        "smooth Gaussian",
+        r#"{"surface":"gaussian","sigma_um":0.02,"corr_um":5,"fresnel":0.9}"#,
+    ),
+    (
+        "medium Gaussian",
+        r#"{"surface":"gaussian","sigma_um":0.14,"corr_um":2,"fresnel":0.9}"#,
+    ),
+    (
+        "rough Gaussian",
+        r#"{"surface":"gaussian","sigma_um":0.5,"corr_um":3,"fresnel":0.9}"#,
+    ),
+    (
+        "anisotropic",
+        r#"{"surface":"gaussian","sigma_um":0.08,"corr_x_um":2,"corr_y_um":10,"fresnel":0.9}"#,
+    ),
+    (
+        "fractal H=0.7",
+        r#"{"surface":"fractal","hurst":0.7,"sigma_um":0.05,"lag_um":1,"fresnel":0.9}"#,
+    ),
+    (
+        "fractal H=0.35",
+        r#"{"surface":"fractal","hurst":0.35,"sigma_um":0.2,"lag_um":1,"fresnel":0.9}"#,
+    ),
+];

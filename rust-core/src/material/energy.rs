@@ -543,7 +543,7 @@ impl EnergyTable {
         TableProgram {
             table: self,
             b,
-            m: b.table(f32s(&self.m)),
+            m: OnceCell::new(),
             packed: OnceCell::new(),
             terms: derivatives
                 .iter()
@@ -560,8 +560,9 @@ impl EnergyTable {
 pub struct TableProgram<'a> {
     table: &'a EnergyTable,
     b: &'a Builder,
-    m: Table,
-    /// `EnergyTable::packed_pairs`, made where first read.
+    /// m per cell and node, and `EnergyTable::packed_pairs`, each made
+    /// where first read (a grating's RGB eval reads only the packed one).
+    m: OnceCell<Table>,
     packed: OnceCell<Table>,
     /// Per derivative: ln(p / p0) and the table of d m / d ln p.
     terms: Vec<(Value<'a>, Table)>,
@@ -573,12 +574,20 @@ impl<'a> TableProgram<'a> {
         self.table.colour_neutral()
     }
 
+    /// The table of m as a program table.
+    fn m_table(&self) -> Table {
+        *self.m.get_or_init(|| {
+            self.b
+                .table(self.table.m.iter().map(|&x| x as f32).collect())
+        })
+    }
+
     /// The entry at `index`: m there, moved along the derivatives.
     fn entry(&self, index: Value<'a>) -> Value<'a> {
         let b = self.b;
         self.terms
             .iter()
-            .fold(b.gather(self.m, index), |m, &(dlog, d)| {
+            .fold(b.gather(self.m_table(), index), |m, &(dlog, d)| {
                 b.gather(d, index).fma(dlog, m)
             })
     }
