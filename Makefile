@@ -132,9 +132,10 @@ test-rust:
 # file runs in one worker (--dist loadfile): test_wheel.py builds dist/ and
 # test_animation.py starts a Dask cluster in module fixtures. The files go
 # out longest first (tests/conftest.py; --no-loadscope-reorder keeps that
-# order instead of xdist's by test count).
+# order instead of xdist's by test count). The 20 slowest tests are listed at
+# the end (a slow CI machine's log shows where its time went).
 test-python: plugin render-tool
-	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder tests
+	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder --durations=20 tests
 
 # Everything, in the order that fails fastest.
 test: setup lint test-rust test-python
