@@ -549,7 +549,7 @@ impl EnergyTable {
                 .iter()
                 .map(|d| {
                     let p = b.param(d.id, d.built);
-                    ((p * (1.0 / d.built)).ln(), b.table(f32s(&d.per_log)))
+                    ((p * b.built(1.0 / d.built)).ln(), b.table(f32s(&d.per_log)))
                 })
                 .collect(),
         }

@@ -67,3 +67,89 @@ fn every_material_exports_every_program() {
         }
     }
 }
+
+/// A material rebuilt for parameters 0.3% away exports the same code,
+/// constants included, with tables of the same lengths: what follows the
+/// parameters is in the tables (`Builder::built`), so that a renderer's
+/// compiled kernels stay valid across such a rebuild (docs/jit.md,
+/// "Parameters"). Every parameter the models' programs read, in each kind
+/// and its program for the built values; the grating as an optimiser sees
+/// it (differentiating its period). What may change the code (a grating's
+/// count of orders, a table profile's RGB plan) does not change over 0.3%
+/// at these values.
+#[test]
+fn a_nearby_material_exports_the_same_code() {
+    let cases: [(&str, &[&str]); 9] = [
+        (
+            r#"{"surface": "gaussian", "sigma_um": 0.05, "corr_um": 2.0, "fresnel": 0.9}"#,
+            &["sigma_um", "corr_um", "fresnel"],
+        ),
+        (
+            r#"{"surface": "gaussian", "sigma_um": 0.5, "corr_um": 5.0}"#,
+            &["sigma_um", "corr_um"],
+        ),
+        (
+            r#"{"surface": "gaussian", "sigma_um": 0.1, "corr_x_um": 0.8, "corr_y_um": 6.0, "fresnel": "aluminium"}"#,
+            &["sigma_um", "corr_x_um", "corr_y_um"],
+        ),
+        (
+            r#"{"surface": "fractal", "sigma_um": 0.05, "hurst": 0.7, "lag_um": 1.0}"#,
+            &["sigma_um", "lag_um"],
+        ),
+        (
+            r#"{"surface": "periodic", "period_um": 1.56, "profile": "sine", "height_um": 0.2, "coherence_um": 4.0, "fresnel": 0.9, "gradients": ["period_um"]}"#,
+            &["period_um", "height_um", "coherence_um"],
+        ),
+        (
+            r#"{"surface": "periodic", "period_um": 2.5, "profile": "rect", "height_um": 0.15, "width_um": 0.5, "coherence_um": 5.0}"#,
+            &["period_um", "height_um", "width_um", "coherence_um"],
+        ),
+        (
+            r#"{"surface": "periodic", "period_um": 1.0, "profile": {"heights_um": [0.0, 0.05, 0.1, 0.15, 0.1, 0.05]}, "coherence_um": 5.0}"#,
+            &["period_um"],
+        ),
+        (
+            r#"{"surface": "cd", "period_um": 1.0, "width_um": 0.2, "coherence_um": 3.0}"#,
+            &["period_um", "width_um"],
+        ),
+        (
+            r#"{"surface": "periodic", "period_um": 1.6, "profile": "sine", "height_um": 0.25, "coherence_um": 8.0, "energy": "conserving"}"#,
+            &["period_um", "height_um"],
+        ),
+    ];
+    let kinds: Vec<(ProgramKind, bool)> = ProgramKind::ALL
+        .iter()
+        .flat_map(|&k| [(k, false), (k, true)])
+        .collect();
+    let export = |brdf: &Brdf, (kind, at_built): (ProgramKind, bool)| {
+        if at_built {
+            brdf.program_at_built(kind)
+        } else {
+            brdf.program(kind)
+        }
+    };
+    for (json, keys) in cases {
+        let base: serde_json::Value = serde_json::from_str(json).unwrap();
+        let brdf = Brdf::from_json(json).unwrap();
+        for key in keys {
+            let mut moved = base.clone();
+            let v = moved[*key].as_f64().unwrap();
+            moved[*key] = serde_json::json!(v * 1.003);
+            let near = Brdf::from_json(&moved.to_string()).unwrap();
+            let mut tables_moved = false;
+            for &k in &kinds {
+                let (p, q) = (export(&brdf, k), export(&near, k));
+                assert_eq!(p.is_some(), q.is_some(), "{json}, {key}: {k:?}");
+                let (Some(p), Some(q)) = (p, q) else { continue };
+                assert!(p.code == q.code, "{json}, {key}: the code of {k:?} changed");
+                let lengths = |p: &crate::program::Program| -> Vec<usize> {
+                    p.tables.iter().map(|t| t.len()).collect()
+                };
+                assert_eq!(lengths(&p), lengths(&q), "{json}, {key}: {k:?}'s tables");
+                tables_moved |= p.tables != q.tables || p.params != q.params;
+            }
+            // The change reached the programs (through tables or parameters)
+            assert!(tables_moved, "{json}, {key}: no program changed");
+        }
+    }
+}

@@ -10,6 +10,8 @@ use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 struct State {
     code: Vec<Instr>,
     consts: HashMap<u32, u32>,
+    /// The table of the built constants (`Builder::built`).
+    built_table: Option<u32>,
     tables: Vec<Vec<f32>>,
     n_inputs: u32,
     /// Parameters by slot, and the register of each.
@@ -186,6 +188,37 @@ impl Builder {
         self.value(id)
     }
 
+    /// A constant derived from the material's parameters (`1 / period`,
+    /// a count's scale, ...), rounded to f32. A renderer reads it from the
+    /// program's tables rather than from the code: a material rebuilt for
+    /// slightly different parameters then has the same code (the same
+    /// compiled kernels, docs/jit.md "Parameters") as long as its shape
+    /// does not change. Read outside every region (its `Op::Gather` at a
+    /// constant index is hoisted with the constants). Equal values do not
+    /// share a slot: which values coincide may change with the parameters,
+    /// and the code would with it.
+    pub fn built(&self, x: f64) -> Value<'_> {
+        let (table, slot) = {
+            let mut s = self.state.borrow_mut();
+            let t = match s.built_table {
+                Some(t) => t,
+                None => {
+                    s.tables.push(Vec::new());
+                    let t = (s.tables.len() - 1) as u32;
+                    s.built_table = Some(t);
+                    t
+                }
+            };
+            let values = &mut s.tables[t as usize];
+            values.push(x as f32);
+            (t, values.len() - 1)
+        };
+        let index = self.c(slot as f64);
+        let id = self.push(Op::Gather, table, index.id, 0);
+        self.state.borrow_mut().scope[id as usize] = OUTSIDE;
+        self.value(id)
+    }
+
     /// The material parameter `id`, whose value is `value` (rounded to
     /// f32) for the material the program is built for: an `Op::Param`
     /// register (one per id), so that a renderer can change the value
@@ -247,12 +280,18 @@ impl Builder {
         // Backwards: what the live instructions read; a region is kept
         // (with its mask) where anything inside it is live. Repeated until
         // nothing changes, since a kept region's mask lies before it.
-        let hoisted = |op: Op| matches!(op, Op::Input | Op::Const | Op::Param);
+        // Inputs, constants, parameters and built constants (gathers from
+        // their table, at constant indices) come first, outside every region.
+        let hoisted = |i: usize| {
+            let ins = s.code[i];
+            matches!(ins.op, Op::Input | Op::Const | Op::Param)
+                || (ins.op == Op::Gather && Some(ins.a) == s.built_table)
+        };
         loop {
             let mut changed = false;
             for i in (0..n).rev() {
                 let ins = s.code[i];
-                let inside_live = || (i + 1..end[i]).any(|k| live[k] && !hoisted(s.code[k].op));
+                let inside_live = || (i + 1..end[i]).any(|k| live[k] && !hoisted(k));
                 if ins.op == Op::If && !live[i] && inside_live() {
                     live[i] = true;
                     live[end[i]] = true;
@@ -271,8 +310,8 @@ impl Builder {
             }
         }
         // Renumber the live instructions and the tables they use: inputs,
-        // constants and parameters first (none inside a region), then the
-        // rest in order.
+        // constants, parameters and built constants first (none inside a
+        // region), then the rest in order.
         let mut new_id = vec![u32::MAX; n];
         let mut table_id = vec![u32::MAX; s.tables.len()];
         let mut tables = Vec::new();
@@ -281,8 +320,8 @@ impl Builder {
         let mut inputs_seen = 0;
         let mut tables_in = s.tables.into_iter().map(Some).collect::<Vec<_>>();
         let order = (0..n)
-            .filter(|&i| hoisted(s.code[i].op))
-            .chain((0..n).filter(|&i| !hoisted(s.code[i].op)));
+            .filter(|&i| hoisted(i))
+            .chain((0..n).filter(|&i| !hoisted(i)));
         for i in order {
             let ins = &s.code[i];
             if ins.op == Op::Input {

@@ -218,6 +218,32 @@ impl Program {
         self.tables.iter().map(Vec::len).sum()
     }
 
+    /// Whether instruction `i` reads a constant from a table at a constant
+    /// index (`Builder::built`): a renderer loads it once, not per lane.
+    pub fn is_table_constant(&self, i: usize) -> bool {
+        let ins = self.code[i];
+        ins.op == Op::Gather && self.code[ins.b as usize].op == Op::Const
+    }
+
+    /// The gathers that read per lane (not the built constants' loads):
+    /// what a gather costs on a CPU.
+    pub fn lane_gathers(&self) -> usize {
+        (0..self.code.len())
+            .filter(|&i| self.code[i].op == Op::Gather && !self.is_table_constant(i))
+            .count()
+    }
+
+    /// The instructions that compute per lane: not the inputs, constants,
+    /// parameters and built constants.
+    pub fn lane_ops(&self) -> usize {
+        (0..self.code.len())
+            .filter(|&i| {
+                !matches!(self.code[i].op, Op::Input | Op::Const | Op::Param)
+                    && !self.is_table_constant(i)
+            })
+            .count()
+    }
+
     /// The slot of parameter `id`, if the program reads it.
     pub fn param_slot(&self, id: ParamId) -> Option<usize> {
         self.params.iter().position(|&(p, _)| p == id)

@@ -181,7 +181,8 @@ impl FractalSurface {
     /// mirror (w = 2 cos_i), `build_component`'s ln_c, as
     /// `ln_k (1 - 2/alpha) + shared`, shared from `lobe_scale_shared`.
     fn lobe_scale_shared<'a>(&self, cos_i: Value<'a>) -> Value<'a> {
-        (cos_i * 2.0).ln() * (-2.0 * self.inv_alpha) - self.inv_alpha * self.ln_a_const
+        let b = cos_i.builder();
+        (cos_i * 2.0).ln() * (-2.0 * self.inv_alpha) - b.built(self.inv_alpha * self.ln_a_const)
     }
 
     /// The lobe's share of a component (`sampling::lobe_share` of its mass

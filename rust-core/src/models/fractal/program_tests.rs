@@ -520,7 +520,7 @@ fn bad_inputs_give_finite_outputs() {
 
 /// Instructions, gathers and table sizes of each program kind.
 fn counts(p: &Program) -> (usize, usize, usize) {
-    let gathers = p.code.iter().filter(|i| i.op == Op::Gather).count();
+    let gathers = p.lane_gathers();
     let transcendental = p
         .code
         .iter()

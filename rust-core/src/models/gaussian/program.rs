@@ -346,7 +346,7 @@ impl Gaussian {
     fn sigma_times<'a>(&self, b: &'a Builder, c: f64) -> Value<'a> {
         match self.sigma_um_max {
             Some(_) => b.param(ParamId::SigmaUm, self.surface.sigma_um) * c,
-            None => b.c(self.surface.sigma_um * c),
+            None => b.built(self.surface.sigma_um * c),
         }
     }
 
@@ -436,7 +436,7 @@ impl Gaussian {
         // core widens its defensive share there instead); the lobe frozen
         // at the mirror keeps the rest of its share.
         let (twin, frozen_share) = if s.isotropic {
-            let sd = (m_mean * 2.0).sqrt() / (k * s.corr_x_um);
+            let sd = (m_mean * 2.0).sqrt() / (k * b.built(s.corr_x_um));
             let to_rim = 1.0 - (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
             let near = series & to_rim.lt(sd * 2.0);
             let kf = k * self.sigma_times(b, 1.0);
@@ -487,6 +487,8 @@ impl Gaussian {
     ) -> ([SlopeLobe<'a>; 2], Value<'a>) {
         let s = &self.surface;
         let (tx2, ty2) = (s.corr_x_um * s.corr_x_um, s.corr_y_um * s.corr_y_um);
+        // The correlation lengths' terms as built constants
+        let (tx2_v, ty2_v, dt2) = (b.built(tx2), b.built(ty2), b.built(tx2 - ty2));
         let m_mean = series.select(g0 * g0.exp() / expm1(g0), 1.0);
         let e = 2.0 / (g0 * 0.79 + 1.0) - 1.0;
         let p = e * 2.0 + 3.0;
@@ -497,9 +499,9 @@ impl Gaussian {
         let dx = flat.select(wi[0] * inv_sin, 1.0);
         let dy = flat.select(wi[1] * inv_sin, 0.0);
         let q = k * k * 0.25 / m_mean;
-        let kappa_a = q * (dx * dx * tx2 + dy * dy * ty2);
-        let kappa_y = q * (dy * dy * tx2 + dx * dx * ty2);
-        let kappa_c = q * (dx * dy * (tx2 - ty2));
+        let kappa_a = q * (dx * dx * tx2_v + dy * dy * ty2_v);
+        let kappa_y = q * (dy * dy * tx2_v + dx * dx * ty2_v);
+        let kappa_c = q * (dx * dy * dt2);
         // phi(a) = p ln w + ln D - kappa_a w^2 a^2 along the plane, with w =
         // 2 N / D, N = c + sin_i a, D = 1 + a^2; y = w a = 2 P / D, P = N a.
         let derivatives = |a: Value<'a>| {
@@ -546,9 +548,9 @@ impl Gaussian {
         // The lobe frozen at the mirror (w = 2 cos_i, centre 0).
         let w0 = c * 2.0;
         let frozen = [
-            q * w0 * w0 * (2.0 * tx2),
+            q * w0 * w0 * b.built(2.0 * tx2),
             b.c(0.0),
-            q * w0 * w0 * (2.0 * ty2),
+            q * w0 * w0 * b.built(2.0 * ty2),
         ];
         // The fitted lobe is the frozen one while the mode is within half
         // an sd of the mirror, the Laplace fit from 2 sds on, linear between.
@@ -561,12 +563,16 @@ impl Gaussian {
         let beckmann = match self.sigma_um_max {
             Some(_) => {
                 let four_s2 = self.sigma_times(b, 2.0) * self.sigma_times(b, 2.0);
-                [(2.0 * tx2) / four_s2, b.c(0.0), (2.0 * ty2) / four_s2]
+                [
+                    b.built(2.0 * tx2) / four_s2,
+                    b.c(0.0),
+                    b.built(2.0 * ty2) / four_s2,
+                ]
             }
             None => [
-                b.c(2.0 * tx2 / (4.0 * s.sigma_um * s.sigma_um)),
+                b.built(2.0 * tx2 / (4.0 * s.sigma_um * s.sigma_um)),
                 b.c(0.0),
-                b.c(2.0 * ty2 / (4.0 * s.sigma_um * s.sigma_um)),
+                b.built(2.0 * ty2 / (4.0 * s.sigma_um * s.sigma_um)),
             ],
         };
         let fitted = std::array::from_fn(|i| series.select(laplace[i], beckmann[i]));

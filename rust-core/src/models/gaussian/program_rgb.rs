@@ -288,9 +288,9 @@ pub(crate) fn rgb_from_table<'a>(
             // channels follow the pair's cosine to first order (not at the
             // built parameters, where the cosines are equal).
             let dc = (!lean).then(|| {
-                let cos_table = (x0 * (1.0 / (t.corr_um * t.corr_um))
-                    + g0 * (1.0 / (4.0 * t.sigma_um * t.sigma_um)))
-                    .sqrt();
+                let cos_table = (x0 * b.built(1.0 / (t.corr_um * t.corr_um))
+                    + g0 * b.built(1.0 / (4.0 * t.sigma_um * t.sigma_um)))
+                .sqrt();
                 c - cos_table
             });
             std::array::from_fn(|i| {

@@ -307,7 +307,7 @@ fn program_sizes() {
 }
 
 fn counts(p: &Program) -> (usize, usize) {
-    let gathers = p.code.iter().filter(|i| i.op == Op::Gather).count();
+    let gathers = p.lane_gathers();
     let ops = p
         .code
         .iter()
@@ -562,7 +562,7 @@ fn rgb_table_layouts_match_native() {
 #[test]
 fn at_built_rgb_eval_equals_the_plain_one() {
     use crate::ffi::{stam_brdf_export_program, stam_brdf_free, stam_brdf_new};
-    let gathers = |p: &Program| p.code.iter().filter(|i| i.op == Op::Gather).count();
+    let gathers = |p: &Program| p.lane_gathers();
     let mut lean_for = Vec::new();
     for (name, json) in MATERIALS {
         for energy in ["stam", "conserving"] {

@@ -106,7 +106,7 @@ impl PowerProgram {
     pub(super) fn at<'a>(&self, b: &'a Builder, beta: Value<'a>) -> PowerAt<'a> {
         match self {
             PowerProgram::Rect { height_um, .. } => {
-                let s = (beta * (0.5 * height_um)).sin();
+                let s = (beta * b.built(0.5 * height_um)).sin();
                 PowerAt::Rect { s2: s * s }
             }
             PowerProgram::Table {
@@ -155,7 +155,7 @@ impl PowerProgram {
                     let x = PI * n as f64 * fill;
                     (0.0, 4.0 * fill * fill * (x.sin() / x).powi(2))
                 };
-                (*s2 * c1 + c0).max(0.0)
+                (*s2 * b.built(c1) + c0).max(0.0)
             }
             _ => self.power(b, at, b.c(n as f64)),
         }
@@ -169,7 +169,7 @@ impl PowerProgram {
                 // sinc^2(pi n f) computed, not gathered from the native
                 // table (a gather loads lane by lane on a CPU: slower than
                 // one sine); the same values to f32 rounding.
-                RectOrder::new(b.c(*fill), n).power(*s2)
+                RectOrder::new(b.built(*fill), n).power(*s2)
             }
             (
                 PowerProgram::Table {
@@ -285,9 +285,13 @@ impl PeriodicSurface {
         let w = pair.w;
         let period = b.param(ParamId::PeriodUm, self.period_um);
         let l = b.param(ParamId::CoherenceUm, self.coherence_um);
+        // The built period's values as built constants (`Builder::built`):
+        // a rebuild for a nearby period keeps the code.
         let period_nm = 1000.0 * self.period_um;
         let p_hi = period_nm as f32 as f64;
-        let p_lo = (period - self.period_um as f32 as f64) * 1000.0 + (period_nm - p_hi);
+        let p_lo =
+            (period - b.built(self.period_um as f32 as f64)) * 1000.0 + b.built(period_nm - p_hi);
+        let p_hi = b.built(p_hi);
         // u = u_hi + u_lo as the native path has it (see `exact_uv`), and
         // u P = p + p_err up to the rounding of the small terms.
         let [(u, u_lo), (v, v_lo)] = exact_uv(pair);
@@ -297,9 +301,10 @@ impl PeriodicSurface {
         let x = (p + p_err) * inv_lambda;
         // orders_near: e_min of the nearest order, reach around x.
         let scale = 2.0 * PI * self.coherence_um / self.period_um;
+        let (inv_scale, scale) = (b.built(1.0 / scale), b.built(scale));
         let frac = x - (x + 0.5).floor();
         let e_min = (frac * scale).sq();
-        let reach = (e_min + KERNEL_TAIL_EXPONENT).min(EXP_UNDERFLOW).sqrt() * (1.0 / scale);
+        let reach = (e_min + KERNEL_TAIL_EXPONENT).min(EXP_UNDERFLOW).sqrt() * inv_scale;
         let lo = -(reach - x).floor(); // ceil(x - reach)
         let hi = (x + reach).floor();
         let e_v = (k * (v + v_lo) * l).sq();
@@ -418,7 +423,9 @@ impl PeriodicSurface {
                 // The table's height: a height texture's largest, else the
                 // material's.
                 let built = self.texture_table.as_ref().map_or(height_um, |t| t.0);
-                ProfileProgram::Scaled(Some(b.param(ParamId::HeightUm, height_um) * (1.0 / built)))
+                ProfileProgram::Scaled(Some(
+                    b.param(ParamId::HeightUm, height_um) * b.built(1.0 / built),
+                ))
             }
             Profile::Tabulated { .. } => ProfileProgram::Scaled(None),
         }

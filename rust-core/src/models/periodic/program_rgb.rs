@@ -719,11 +719,11 @@ impl Periodic {
         let lam = if follows {
             b.param(ParamId::PeriodUm, p.period_um)
         } else {
-            b.c(p.period_um)
+            b.built(p.period_um)
         };
         // The coherence length's terms: 2 pi l, 1 / (8 pi^2 l^2) (t = s^2
-        // per 1 / rho^2), 4 pi l^2, and 2 pi l times a number (constants
-        // where it stays).
+        // per 1 / rho^2), 4 pi l^2, and 2 pi l times a number (built
+        // constants where it stays).
         let l = follows.then(|| b.param(ParamId::CoherenceUm, p.coherence_um));
         let (two_pi_l, t_per_inv_rho2, four_pi_l2) = match l {
             Some(l) => {
@@ -737,15 +737,15 @@ impl Periodic {
             None => {
                 let l = p.coherence_um;
                 (
-                    b.c(2.0 * PI * l),
-                    b.c(1.0 / (8.0 * PI * PI * l * l)),
-                    b.c(4.0 * PI * l * l),
+                    b.built(2.0 * PI * l),
+                    b.built(1.0 / (8.0 * PI * PI * l * l)),
+                    b.built(4.0 * PI * l * l),
                 )
             }
         };
         let two_pi_l_times = |x: f64| match l {
             Some(_) => two_pi_l * x,
-            None => b.c(2.0 * PI * p.coherence_um * x),
+            None => b.built(2.0 * PI * p.coherence_um * x),
         };
         let inv_lam = 1.0 / lam;
         let profile = p.profile_program(b, lam);
@@ -792,7 +792,7 @@ impl Periodic {
         // integration runs only where some lane of a packet takes it.
         let slack = match l {
             Some(_) => RGB_TAIL_EXPONENT.sqrt() / two_pi_l,
-            None => b.c(RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * p.coherence_um)),
+            None => b.built(RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * p.coherence_um)),
         };
         let (xa, xb) = (u * NU_LO, u * NU_HI);
         let (x0, x1) = (xa.min(xb), xa.max(xb));

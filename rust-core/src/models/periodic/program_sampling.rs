@@ -143,7 +143,7 @@ impl Periodic {
         lambda: Value<'a>,
     ) -> Value<'a> {
         let period_nm = 1000.0 * self.surface.period_um;
-        let u_n = n * lambda * (1.0 / period_nm);
+        let u_n = n * lambda * b.built(1.0 / period_nm);
         let (x, y) = (-wi[0] - u_n, -wi[1]);
         let r = (x * x + y * y).sqrt();
         let r_max = (1.0 - RIM_COS * RIM_COS).sqrt();
@@ -161,7 +161,7 @@ impl Periodic {
         // beta.
         let beta = self
             .surface
-            .profile_program(b, b.c(self.surface.period_um))
+            .profile_program(b, b.built(self.surface.period_um))
             .scaled_beta(beta);
         let weight = powers.power_rgb(b, beta, n) * gw2;
         weight.finite_non_negative()
@@ -169,7 +169,8 @@ impl Periodic {
 
     /// sigma(lambda) of an order's Gaussian in u and v: 1 / (sqrt 2 k l).
     fn sigma<'a>(&self, lambda: Value<'a>) -> Value<'a> {
-        lambda * (1.0 / (2000.0 * PI * SQRT_2 * self.surface.coherence_um))
+        let b = lambda.builder();
+        lambda * b.built(1.0 / (2000.0 * PI * SQRT_2 * self.surface.coherence_um))
     }
 
     /// The orders, their probabilities and (RGB) band intervals at wi.
@@ -192,7 +193,7 @@ impl Periodic {
                 let count = self.sampling_order_count(crate::spectrum::LAMBDA_MIN_NM)?;
                 // Centres inside the disk: |-wi.x - n du| < half.
                 let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
-                let du = lambda * (1.0 / (1000.0 * self.surface.period_um));
+                let du = lambda * b.built(1.0 / (1000.0 * self.surface.period_um));
                 let first = -((wi[0] + half) / du).floor(); // ceil((-wi.x - half) / du)
                 let last = ((half - wi[0]) / du).floor();
                 for i in 0..count {
@@ -383,11 +384,11 @@ impl Periodic {
         let radius = (-(1.0 - u[1].clamp(0.0, 1.0)).max(1e-30).ln() * 2.0).sqrt();
         let phi = u[2] * (2.0 * PI);
         let (g1, g2) = (radius * phi.cos(), radius * phi.sin());
-        let period_nm = 1000.0 * self.surface.period_um;
+        let inv_period_nm = b.built(1.0 / (1000.0 * self.surface.period_um));
         let (du, dv) = match lambda_nm {
             Some(lambda) => {
                 let sigma = self.sigma(lambda);
-                (chosen * lambda * (1.0 / period_nm) + sigma * g1, sigma * g2)
+                (chosen * lambda * inv_period_nm + sigma * g1, sigma * g2)
             }
             None => {
                 let kappa = kappa.expect("RGB orders carry their tilts");
@@ -400,7 +401,7 @@ impl Periodic {
                 let sigma0 = self.sigma(zero_order_node(b, r));
                 let zero = chosen.eq(0.0);
                 (
-                    zero.select(sigma0 * g1, chosen * lambda * (1.0 / period_nm)),
+                    zero.select(sigma0 * g1, chosen * lambda * inv_period_nm),
                     zero.select(sigma0 * g2, sigma * g1),
                 )
             }
@@ -436,14 +437,15 @@ impl Periodic {
         let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
         let defensive = (wo[2] * (1.0 / PI) + 0.5 / PI) * 0.5;
         let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
-        let period_nm = 1000.0 * self.surface.period_um;
+        let period_nm_f64 = 1000.0 * self.surface.period_um;
+        let period_nm = b.built(period_nm_f64);
         let inv_total = 1.0 / orders.total;
         let mut lobe = b.c(0.0);
         match lambda_nm {
             Some(lambda) => {
                 let sigma = self.sigma(lambda);
                 let inv2s2 = 0.5 / (sigma * sigma);
-                let du = lambda * (1.0 / period_nm);
+                let du = lambda * b.built(1.0 / period_nm_f64);
                 for (&n, &w) in orders.n.iter().zip(&orders.weight) {
                     let d = u - n * du;
                     let e = (d * d + v * v) * inv2s2;
@@ -489,7 +491,7 @@ impl Periodic {
                         for &(centre, m) in &zero {
                             let s = centre / (2000.0 * PI * SQRT_2 * self.surface.coherence_um);
                             let inv2s2 = 0.5 / (s * s);
-                            g = g + (rho2 * -inv2s2).exp() * (m * inv2s2 / PI);
+                            g = g + (rho2 * b.built(-inv2s2)).exp() * b.built(m * inv2s2 / PI);
                         }
                         lobe = lobe + w * g;
                     }

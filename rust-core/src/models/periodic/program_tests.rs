@@ -128,11 +128,7 @@ fn spectral_kernel_matches_native() {
     for (name, brdf) in materials() {
         let e = eval_spectral_errors(&brdf, &pairs, 5);
         let p = exported(&brdf, ProgramKind::EvalSpectral).unwrap();
-        let gathers = p
-            .code
-            .iter()
-            .filter(|i| i.op == crate::program::Op::Gather)
-            .count();
+        let gathers = p.lane_gathers();
         println!(
             "{name}: random pairs f32 {:.2e} f64 {:.2e} abs {:.1e} ({} checked); {} ops, {} gathers",
             e.max_rel_f32,
@@ -169,11 +165,7 @@ fn rgb_matches_native() {
     for (name, brdf) in materials() {
         let e = eval_rgb_errors(&brdf, &pairs);
         let p = exported(&brdf, ProgramKind::EvalRgb).unwrap();
-        let gathers = p
-            .code
-            .iter()
-            .filter(|i| i.op == crate::program::Op::Gather)
-            .count();
+        let gathers = p.lane_gathers();
         println!(
             "{name}: RGB f32 {:.2e} f64 {:.2e} abs {:.1e} ({} checked); {} ops, {} gathers, {} table values",
             e.max_rel_f32,
@@ -306,12 +298,7 @@ fn rgb_peak_errors_of(
 /// the plain one does, and is no larger.
 #[test]
 fn rgb_at_built_on_order_peaks() {
-    let gathers = |p: &crate::program::Program| {
-        p.code
-            .iter()
-            .filter(|i| i.op == crate::program::Op::Gather)
-            .count()
-    };
+    let gathers = |p: &crate::program::Program| p.lane_gathers();
     for (name, brdf) in materials() {
         let Some(lean) = brdf.program_at_built(ProgramKind::EvalRgb) else {
             panic!("{name}: no RGB eval for the built parameters");
@@ -319,14 +306,14 @@ fn rgb_at_built_on_order_peaks() {
         let plain = exported(&brdf, ProgramKind::EvalRgb).unwrap();
         let (e32, _, checked) = rgb_peak_errors_of(&brdf, &lean, 23);
         println!(
-            "{name}: at-built RGB on peaks f32 {e32:.2e} ({checked} pairs); {} ops {} gathers, plain {} ops {} gathers",
-            lean.code.len(),
+            "{name}: at-built RGB on peaks f32 {e32:.2e} ({checked} pairs); {} lane ops {} gathers, plain {} lane ops {} gathers",
+            lean.lane_ops(),
             gathers(&lean),
-            plain.code.len(),
+            plain.lane_ops(),
             gathers(&plain)
         );
         assert!(
-            gathers(&lean) <= gathers(&plain) && lean.code.len() < plain.code.len(),
+            gathers(&lean) <= gathers(&plain) && lean.lane_ops() < plain.lane_ops(),
             "{name}"
         );
         assert!(e32 < RGB_TOLERANCE, "{name}: {e32}");
@@ -663,11 +650,7 @@ fn program_sizes() {
         let mut line = format!("{name}:");
         for kind in ProgramKind::ALL {
             let p = exported(&brdf, kind).unwrap();
-            let gathers = p
-                .code
-                .iter()
-                .filter(|i| i.op == crate::program::Op::Gather)
-                .count();
+            let gathers = p.lane_gathers();
             line += &format!(" {kind:?} {}/{}/{}", p.code.len(), gathers, p.table_len());
         }
         println!("{line}");
@@ -755,10 +738,7 @@ fn conserving_rgb_matches_native() {
         let e = eval_rgb_errors(&brdf, &pairs);
         let (p32, p64, checked) = rgb_peak_errors(&brdf, 31);
         let (e_stam, (p_stam, ..)) = (eval_rgb_errors(&stam, &pairs), rgb_peak_errors(&stam, 31));
-        let sizes = |p: &crate::program::Program| {
-            let gathers = p.code.iter().filter(|i| i.op == crate::program::Op::Gather);
-            (p.code.len(), gathers.count())
-        };
+        let sizes = |p: &crate::program::Program| (p.code.len(), p.lane_gathers());
         let p = exported(&brdf, ProgramKind::EvalRgb).unwrap();
         let (ops, gathers) = sizes(&p);
         let (stam_ops, stam_gathers) = sizes(&exported(&stam, ProgramKind::EvalRgb).unwrap());
@@ -806,10 +786,9 @@ fn conserving_rgb_matches_native() {
 /// sampling programs read the table.
 #[test]
 fn rgb_order_table_only_with_an_rgb_eval() {
-    use crate::program::Op;
     let gathers = |brdf: &Brdf, kind| {
         let p = exported(brdf, kind).unwrap();
-        p.code.iter().filter(|i| i.op == Op::Gather).count()
+        p.lane_gathers()
     };
     for (period_um, has_rgb) in [(1.6, true), (60.0, false)] {
         let json = format!(
