@@ -71,10 +71,12 @@ def mean_of(scene, params=None, seed=SEED):
     return float(np.mean(np.array(mi.render(scene, params=params, seed=seed, spp=16))))
 
 
-def check_gradients(bsdf, keys_steps, integrator=PRB):
+def check_gradients(bsdf, keys_steps):
     """Reverse-mode AD along every key at once (one gradient pass, one
     kernel) against each key's central difference by +-its step: {key: (x0,
-    fd, ad, values)}."""
+    fd, ad, values)}. Gratings with emitter samples only (the module's
+    docstring says why)."""
+    integrator = DIRECT if bsdf.get('surface') == 'periodic' else PRB
     scene = mi.load_dict(scene_dict(bsdf, integrator=integrator))
     params = mi.traverse(scene)
     full = {key: 'plate.bsdf.' + key for key, _ in keys_steps}
@@ -143,16 +145,16 @@ def test_gradient_equals_finite_difference(variant, key, bsdf, step):
     assert_gradient(variant, key, bsdf, step)
 
 
-def assert_gradient(variant, key, bsdf, step, integrator=PRB):
+def assert_gradient(variant, key, bsdf, step):
     """check_gradients of one key in `variant` (key: the BSDF's parameter,
     or a texture's, 'twist.value'), printed and held to GRADIENT_TOL."""
-    assert_gradients(variant, bsdf, [(key, step)], integrator)
+    assert_gradients(variant, bsdf, [(key, step)])
 
 
-def assert_gradients(variant, bsdf, keys_steps, integrator=PRB):
+def assert_gradients(variant, bsdf, keys_steps):
     """check_gradients in `variant`, printed and held to GRADIENT_TOL."""
     stam_mitsuba.setup(variant)
-    results = check_gradients({'type': 'diffraction', **bsdf}, keys_steps, integrator)
+    results = check_gradients({'type': 'diffraction', **bsdf}, keys_steps)
     failures = []
     for key, (x0, fd, ad, values) in results.items():
         print('%s %s = %g: AD %.6g, central difference %.6g (means %s)'
@@ -189,9 +191,8 @@ def test_grating_gradients_equal_finite_differences(variant, bsdf, keys_steps):
     a gradient), the profile's height (a sine's through its table at scaled
     beta) and a rect's width. Each material's parameters carry gradients
     together: one gradient pass (one kernel to compile), then each one's
-    central difference. Emitter samples only (DIRECT): the module's
-    docstring says why."""
-    assert_gradients(variant, bsdf, keys_steps, DIRECT)
+    central difference. Emitter samples only (check_gradients)."""
+    assert_gradients(variant, bsdf, keys_steps)
 
 
 @pytest.mark.parametrize('variant', VARIANTS)

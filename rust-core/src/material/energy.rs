@@ -539,7 +539,6 @@ impl EnergyTable {
         b: &'a Builder,
         derivatives: &[&TableDerivative],
     ) -> TableProgram<'a> {
-        let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect();
         TableProgram {
             table: self,
             b,
@@ -554,6 +553,11 @@ impl EnergyTable {
                 .collect(),
         }
     }
+}
+
+/// A table's values as a program table's (f32).
+fn f32s(values: &[f64]) -> Vec<f32> {
+    values.iter().map(|&x| x as f32).collect()
 }
 
 /// `EnergyTable::program`: the table's lookups as program operations.
@@ -576,10 +580,7 @@ impl<'a> TableProgram<'a> {
 
     /// The table of m as a program table.
     fn m_table(&self) -> Table {
-        *self.m.get_or_init(|| {
-            self.b
-                .table(self.table.m.iter().map(|&x| x as f32).collect())
-        })
+        *self.m.get_or_init(|| self.b.table(f32s(&self.table.m)))
     }
 
     /// The entry at `index`: m there, moved along the derivatives.
