@@ -547,11 +547,8 @@ impl Gaussian {
         };
         // The lobe frozen at the mirror (w = 2 cos_i, centre 0).
         let w0 = c * 2.0;
-        let frozen = [
-            q * w0 * w0 * b.built(2.0 * tx2),
-            b.c(0.0),
-            q * w0 * w0 * b.built(2.0 * ty2),
-        ];
+        let (two_tx2, two_ty2) = (b.built(2.0 * tx2), b.built(2.0 * ty2));
+        let frozen = [q * w0 * w0 * two_tx2, b.c(0.0), q * w0 * w0 * two_ty2];
         // The fitted lobe is the frozen one while the mode is within half
         // an sd of the mirror, the Laplace fit from 2 sds on, linear between.
         let r = a * p_aa.sqrt();
@@ -563,11 +560,7 @@ impl Gaussian {
         let beckmann = match self.sigma_um_max {
             Some(_) => {
                 let four_s2 = self.sigma_times(b, 2.0) * self.sigma_times(b, 2.0);
-                [
-                    b.built(2.0 * tx2) / four_s2,
-                    b.c(0.0),
-                    b.built(2.0 * ty2) / four_s2,
-                ]
+                [two_tx2 / four_s2, b.c(0.0), two_ty2 / four_s2]
             }
             None => [
                 b.built(2.0 * tx2 / (4.0 * s.sigma_um * s.sigma_um)),

@@ -4,7 +4,7 @@
 //! strategies and cosine sampling), bad input, op and gather counts.
 
 use crate::material::program::ProgramKind;
-use crate::program::{Op, Program};
+use crate::program::Program;
 use crate::testing::chi2::chi2_fit;
 use crate::testing::programs::{
     eval_rgb_errors, eval_spectral_errors, exported, pairs, round, run_both, ProgramSampler,
@@ -307,13 +307,7 @@ fn program_sizes() {
 }
 
 fn counts(p: &Program) -> (usize, usize) {
-    let gathers = p.lane_gathers();
-    let ops = p
-        .code
-        .iter()
-        .filter(|i| !matches!(i.op, Op::Input | Op::Const))
-        .count();
-    (ops, gathers)
+    (p.lane_ops(), p.lane_gathers())
 }
 
 fn mean_var(xs: &[f64]) -> (f64, f64) {
@@ -562,7 +556,6 @@ fn rgb_table_layouts_match_native() {
 #[test]
 fn at_built_rgb_eval_equals_the_plain_one() {
     use crate::ffi::{stam_brdf_export_program, stam_brdf_free, stam_brdf_new};
-    let gathers = |p: &Program| p.lane_gathers();
     let mut lean_for = Vec::new();
     for (name, json) in MATERIALS {
         for energy in ["stam", "conserving"] {
@@ -577,7 +570,7 @@ fn at_built_rgb_eval_equals_the_plain_one() {
                 continue;
             };
             let plain = exported(&b, ProgramKind::EvalRgb).unwrap();
-            assert_eq!(gathers(&lean) + 48, gathers(&plain), "{name}");
+            assert_eq!(lean.lane_gathers() + 48, plain.lane_gathers(), "{name}");
             let mut worst: f64 = 0.0;
             for (wi, wo) in pairs(4000, 3) {
                 let (wi, wo) = (round(wi), round(wo));

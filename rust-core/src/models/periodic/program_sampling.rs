@@ -142,8 +142,7 @@ impl Periodic {
         n: Value<'a>,
         lambda: Value<'a>,
     ) -> Value<'a> {
-        let period_nm = 1000.0 * self.surface.period_um;
-        let u_n = n * lambda * b.built(1.0 / period_nm);
+        let u_n = n * lambda * self.inv_period_nm(b);
         let (x, y) = (-wi[0] - u_n, -wi[1]);
         let r = (x * x + y * y).sqrt();
         let r_max = (1.0 - RIM_COS * RIM_COS).sqrt();
@@ -165,6 +164,12 @@ impl Periodic {
             .scaled_beta(beta);
         let weight = powers.power_rgb(b, beta, n) * gw2;
         weight.finite_non_negative()
+    }
+
+    /// 1 / P with the period P in nm, a built constant: an order's step
+    /// in u is lambda / P.
+    fn inv_period_nm<'a>(&self, b: &'a Builder) -> Value<'a> {
+        b.built(1.0 / (1000.0 * self.surface.period_um))
     }
 
     /// sigma(lambda) of an order's Gaussian in u and v: 1 / (sqrt 2 k l).
@@ -193,7 +198,7 @@ impl Periodic {
                 let count = self.sampling_order_count(crate::spectrum::LAMBDA_MIN_NM)?;
                 // Centres inside the disk: |-wi.x - n du| < half.
                 let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
-                let du = lambda * b.built(1.0 / (1000.0 * self.surface.period_um));
+                let du = lambda * self.inv_period_nm(b);
                 let first = -((wi[0] + half) / du).floor(); // ceil((-wi.x - half) / du)
                 let last = ((half - wi[0]) / du).floor();
                 for i in 0..count {
@@ -384,7 +389,7 @@ impl Periodic {
         let radius = (-(1.0 - u[1].clamp(0.0, 1.0)).max(1e-30).ln() * 2.0).sqrt();
         let phi = u[2] * (2.0 * PI);
         let (g1, g2) = (radius * phi.cos(), radius * phi.sin());
-        let inv_period_nm = b.built(1.0 / (1000.0 * self.surface.period_um));
+        let inv_period_nm = self.inv_period_nm(b);
         let (du, dv) = match lambda_nm {
             Some(lambda) => {
                 let sigma = self.sigma(lambda);
@@ -437,15 +442,14 @@ impl Periodic {
         let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
         let defensive = (wo[2] * (1.0 / PI) + 0.5 / PI) * 0.5;
         let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
-        let period_nm_f64 = 1000.0 * self.surface.period_um;
-        let period_nm = b.built(period_nm_f64);
+        let period_nm = b.built(1000.0 * self.surface.period_um);
         let inv_total = 1.0 / orders.total;
         let mut lobe = b.c(0.0);
         match lambda_nm {
             Some(lambda) => {
                 let sigma = self.sigma(lambda);
                 let inv2s2 = 0.5 / (sigma * sigma);
-                let du = lambda * b.built(1.0 / period_nm_f64);
+                let du = lambda * self.inv_period_nm(b);
                 for (&n, &w) in orders.n.iter().zip(&orders.weight) {
                     let d = u - n * du;
                     let e = (d * d + v * v) * inv2s2;

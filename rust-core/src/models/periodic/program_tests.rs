@@ -298,7 +298,6 @@ fn rgb_peak_errors_of(
 /// the plain one does, and is no larger.
 #[test]
 fn rgb_at_built_on_order_peaks() {
-    let gathers = |p: &crate::program::Program| p.lane_gathers();
     for (name, brdf) in materials() {
         let Some(lean) = brdf.program_at_built(ProgramKind::EvalRgb) else {
             panic!("{name}: no RGB eval for the built parameters");
@@ -308,12 +307,12 @@ fn rgb_at_built_on_order_peaks() {
         println!(
             "{name}: at-built RGB on peaks f32 {e32:.2e} ({checked} pairs); {} lane ops {} gathers, plain {} lane ops {} gathers",
             lean.lane_ops(),
-            gathers(&lean),
+            lean.lane_gathers(),
             plain.lane_ops(),
-            gathers(&plain)
+            plain.lane_gathers()
         );
         assert!(
-            gathers(&lean) <= gathers(&plain) && lean.lane_ops() < plain.lane_ops(),
+            lean.lane_gathers() <= plain.lane_gathers() && lean.lane_ops() < plain.lane_ops(),
             "{name}"
         );
         assert!(e32 < RGB_TOLERANCE, "{name}: {e32}");
