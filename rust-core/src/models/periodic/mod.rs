@@ -85,8 +85,9 @@ pub struct Periodic {
     /// made on the first sample.
     grating: OnceLock<Option<sampling::GratingTable>>,
     /// The RGB sampling programs' order weights and tilts over the
-    /// incident direction (program_sampling.rs), made on the first build.
-    rgb_orders: OnceLock<Vec<f32>>,
+    /// incident direction (program_sampling.rs), made on the first build,
+    /// with its n_max.
+    rgb_orders: OnceLock<(usize, Vec<f32>)>,
 }
 
 impl Periodic {
@@ -344,6 +345,26 @@ fn beta_samples(half_range: f64) -> usize {
     (by_range as usize).max(31) + 1
 }
 
+/// The interval (lo, hi] of a geometric grid of ratio 2^(1/3) (..., 1,
+/// 1.26, 1.587, 2, ...) that holds x > 0: what order counts and table rows
+/// are planned for (the top for a period, the bottom for a coherence
+/// length: more orders reach the band as either moves so). The values of
+/// one interval give tables of the same rows and, where a renderer
+/// differentiates the parameter, programs of the same shape, so that an
+/// optimiser moving it reuses the kernels Dr.Jit compiled for the last
+/// rebuild (each shape's forward and adjoint kernels take minutes to compile
+/// on a small CPU). The orders planned beyond a material's own are never
+/// taken. (x itself where the grid's arithmetic fails.)
+pub(super) fn planning_interval(x: f64) -> (f64, f64) {
+    let hi = ((3.0 * x.log2()).ceil() / 3.0).exp2();
+    let lo = hi * (-1.0f64 / 3.0).exp2();
+    if hi.is_finite() && lo > 0.0 && lo <= x && x <= hi {
+        (lo, hi)
+    } else {
+        (x, x)
+    }
+}
+
 /// Largest |n| whose peak can reach the visible band at some direction
 /// (|u| <= 2, lambda >= 0.36 um), plus the Gaussian-tail margin of the
 /// spectral kernel for the shortest coherence length.
@@ -369,8 +390,27 @@ impl PeriodicSurface {
     ) -> Result<PeriodicSurface, String> {
         check_positive("period_um", period_um)?;
         check_positive("coherence_um", coherence_um)?;
-        let n_phys = physical_order_limit(period_um, coherence_um);
-        let model = match &profile {
+        // Rows for the planning period where the table stays within its
+        // size limit, else for the period's own orders.
+        let planned = physical_order_limit(
+            planning_interval(period_um).1,
+            planning_interval(coherence_um).0,
+        );
+        let own = physical_order_limit(period_um, coherence_um);
+        let model = Self::model(period_um, &profile, planned)
+            .or_else(|_| Self::model(period_um, &profile, own))?;
+        Ok(PeriodicSurface {
+            period_um,
+            coherence_um,
+            profile,
+            model,
+            texture_table: None,
+        })
+    }
+
+    /// The profile's model with orders up to `n_phys`.
+    fn model(period_um: f64, profile: &Profile, n_phys: i64) -> Result<Model, String> {
+        Ok(match profile {
             Profile::Rect {
                 height_um,
                 width_um,
@@ -413,13 +453,6 @@ impl PeriodicSurface {
                 }
                 Model::Table(tabulated_table(heights_um, period_um, n_phys)?)
             }
-        };
-        Ok(PeriodicSurface {
-            period_um,
-            coherence_um,
-            profile,
-            model,
-            texture_table: None,
         })
     }
 
@@ -435,8 +468,14 @@ impl PeriodicSurface {
                 "height_um_max ({height_um_max}) must be at least height_um ({height_um}) and at most 1000 um"
             ));
         }
-        let n_phys = physical_order_limit(self.period_um, self.coherence_um);
-        self.texture_table = Some((height_um_max, sine_table(height_um_max, n_phys)?));
+        let planned = physical_order_limit(
+            planning_interval(self.period_um).1,
+            planning_interval(self.coherence_um).0,
+        );
+        let own = physical_order_limit(self.period_um, self.coherence_um);
+        let table =
+            sine_table(height_um_max, planned).or_else(|_| sine_table(height_um_max, own))?;
+        self.texture_table = Some((height_um_max, table));
         Ok(self)
     }
 

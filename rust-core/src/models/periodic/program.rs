@@ -251,10 +251,36 @@ fn exact_uv<'a>(pair: &PairProgram<'a>) -> [(Value<'a>, Value<'a>); 2] {
 }
 
 impl PeriodicSurface {
+    /// The period the order counts of `b`'s programs are planned for:
+    /// the top of its `planning_interval` where the renderer differentiates
+    /// the period (an optimiser moving it then rebuilds programs of the
+    /// same shape), else the period itself (no order more than it needs).
+    pub(super) fn plan_period_um(&self, b: &Builder) -> f64 {
+        if b.differentiated(ParamId::PeriodUm) {
+            super::planning_interval(self.period_um).1
+        } else {
+            self.period_um
+        }
+    }
+
+    /// The coherence lengths (shortest, longest) `b`'s programs are planned
+    /// for: its `planning_interval` where the renderer differentiates it,
+    /// else the coherence length itself.
+    pub(super) fn plan_coherence_um(&self, b: &Builder) -> (f64, f64) {
+        if b.differentiated(ParamId::CoherenceUm) {
+            super::planning_interval(self.coherence_um)
+        } else {
+            (self.coherence_um, self.coherence_um)
+        }
+    }
+
     /// The most orders `orders_near` can return: an interval of length
     /// 2 reach holds at most floor(2 reach) + 1 integers.
-    pub(super) fn max_orders_near(&self) -> usize {
-        let scale = 2.0 * PI * self.coherence_um / self.period_um;
+    /// Planned for `plan_period_um` and the shortest `plan_coherence_um`,
+    /// so that it changes only at the planning grid's steps where they are
+    /// differentiated.
+    pub(super) fn max_orders_near(&self, b: &Builder) -> usize {
+        let scale = 2.0 * PI * self.plan_coherence_um(b).0 / self.plan_period_um(b);
         let e_min_max = (0.5 * scale).powi(2);
         let reach = (e_min_max + KERNEL_TAIL_EXPONENT).min(EXP_UNDERFLOW).sqrt() / scale;
         (2.0 * reach).floor() as usize + 1
@@ -322,7 +348,7 @@ impl PeriodicSurface {
             ProfileProgram::Scaled(_) => None,
         };
         let mut sum = b.c(0.0);
-        for i in 0..self.max_orders_near() {
+        for i in 0..self.max_orders_near(b) {
             let n = lo + i as f64;
             let d = (n.fma(-lambda_nm, p) + p_err) * inv_lambda * a;
             let e = d.fma(d, e_v);

@@ -283,15 +283,21 @@ const PERIOD_REACH: f64 = 1.06;
 const COHERENCE_REACH: f64 = 1.06;
 
 impl RgbPlan {
-    /// The plan for the material; `reach` > 1: for every period up to that
-    /// factor of the built one (more orders can fall in the band, and
+    /// The plan for the material with the period `period_um` (its own, or
+    /// the one its programs plan for, `plan_period_um`) and the coherence
+    /// length `coherence_um`; `reach` > 1: for every period up to that
+    /// factor of `period_um` (more orders can fall in the band, and
     /// narrower peaks, as the period grows) and every coherence length
-    /// within that factor of the built one (a shorter one widens the
-    /// peaks' reach and their width, a longer one narrows them).
-    fn new(p: &PeriodicSurface, reach: f64) -> Option<RgbPlan> {
+    /// within COHERENCE_REACH of `coherence_um` (a shorter one widens the
+    /// peaks' reach and their width, a longer one narrows them). The
+    /// coherence length is its own even where it is differentiated: planned
+    /// for its interval's shortest (`plan_coherence_um`), the sine grating of
+    /// the gradient tests would unroll two more broad orders, 25% more
+    /// operations and gathers (its period's interval costs 16 operations).
+    fn new(reach: f64, period_um: f64, coherence_um: f64) -> Option<RgbPlan> {
         let coherence_reach = if reach > 1.0 { COHERENCE_REACH } else { 1.0 };
-        let (l, lam) = (p.coherence_um / coherence_reach, p.period_um * reach);
-        let l_max = p.coherence_um * coherence_reach;
+        let (l, lam) = (coherence_um / coherence_reach, period_um * reach);
+        let l_max = coherence_um * coherence_reach;
         let slack = RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * l);
         // orders_in_band: an interval of length (|u| (nu_hi - nu_lo) + 2
         // slack) Lam, |u| <= 2.
@@ -327,7 +333,8 @@ impl Periodic {
     /// MAX_RGB_ORDERS narrow orders unrolled for its built period); its RGB
     /// sampling programs exist only then (the JIT path needs all of them).
     pub(super) fn has_rgb_program(&self) -> bool {
-        RgbPlan::new(&self.surface, 1.0).is_some()
+        let p = &self.surface;
+        RgbPlan::new(1.0, p.period_um, p.coherence_um).is_some()
     }
 }
 
@@ -708,12 +715,15 @@ impl Periodic {
         // the coherence length moves). (Where that plan would unroll more
         // than MAX_RGB_ORDERS, both stay constants.)
         let reaching = (!b.at_built())
-            .then(|| RgbPlan::new(p, PERIOD_REACH))
+            .then(|| {
+                RgbPlan::new(PERIOD_REACH, p.plan_period_um(b), p.coherence_um)
+                    .or_else(|| RgbPlan::new(PERIOD_REACH, p.period_um, p.coherence_um))
+            })
             .flatten();
         let follows = reaching.is_some();
         let plan = match reaching {
             Some(plan) => plan,
-            None => RgbPlan::new(p, 1.0)?,
+            None => RgbPlan::new(1.0, p.period_um, p.coherence_um)?,
         };
         let powers = PowerProgram::new(b, p);
         let lam = if follows {

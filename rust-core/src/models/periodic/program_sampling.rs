@@ -39,6 +39,7 @@ use crate::optics::program::Vec3;
 use crate::program::lookup::select_chain;
 use crate::program::{Builder, Value};
 use crate::sampling::{band_density, DEFENSIVE_FRACTION, RGB_BAND_NM};
+use std::borrow::Cow;
 use std::f64::consts::{PI, SQRT_2};
 use std::sync::OnceLock;
 
@@ -125,10 +126,10 @@ struct Orders<'a> {
 const ORDER_CELLS_PER_AXIS: usize = 32;
 
 impl Periodic {
-    /// Orders whose centre can be inside the disk: |u_n| <= 2 at the
-    /// shortest wavelength.
-    fn sampling_order_count(&self, lambda_min_nm: f64) -> Option<usize> {
-        let count = (2.0 * 1000.0 * self.surface.period_um / lambda_min_nm).floor() as usize + 2;
+    /// Orders whose centre can be inside the disk for a period of
+    /// `period_um`: |u_n| <= 2 at the shortest wavelength.
+    fn sampling_order_count(period_um: f64, lambda_min_nm: f64) -> Option<usize> {
+        let count = (2.0 * 1000.0 * period_um / lambda_min_nm).floor() as usize + 2;
         (count <= MAX_SAMPLING_ORDERS).then_some(count)
     }
 
@@ -195,7 +196,13 @@ impl Periodic {
         };
         match lambda {
             Some(lambda) => {
-                let count = self.sampling_order_count(crate::spectrum::LAMBDA_MIN_NM)?;
+                // As many as the planned period has (orders beyond the
+                // period's own are never inside the disk: not taken).
+                let count = |period_um| {
+                    Self::sampling_order_count(period_um, crate::spectrum::LAMBDA_MIN_NM)
+                };
+                let count =
+                    count(self.surface.plan_period_um(b)).or(count(self.surface.period_um))?;
                 // Centres inside the disk: |-wi.x - n du| < half.
                 let half = (1.0 - wi[1] * wi[1]).max(0.0).sqrt();
                 let du = lambda * self.inv_period_nm(b);
@@ -216,7 +223,7 @@ impl Periodic {
                 // The exact weights and tilts at the centre of wi's cell
                 // (`rgb_order_table`): sample and pdf read the same ones,
                 // so the density stays exact for them.
-                let (table, n_max) = self.rgb_order_table()?;
+                let (table, n_max) = self.rgb_order_table(self.surface.plan_period_um(b))?;
                 let entries = 2 * n_max + 1;
                 let cells = ORDER_CELLS_PER_AXIS as f64;
                 let index =
@@ -310,36 +317,49 @@ impl Periodic {
     /// for a material without an RGB eval program, which the JIT path
     /// cannot render in RGB (periods beyond ~20 um: the table would take
     /// about a second to make and be unused).
-    fn rgb_order_table(&self) -> Option<(&[f32], usize)> {
+    /// `period_um`: the period the programs plan for (`plan_period_um`;
+    /// the table is kept for the first one asked, the only one a material's
+    /// sampling programs ask for).
+    fn rgb_order_table(&self, period_um: f64) -> Option<(Cow<'_, [f32]>, usize)> {
         if !self.has_rgb_program() {
             return None;
         }
-        let n_max = self.sampling_order_count(RGB_BAND_NM.0)? - 2;
-        let table = self.rgb_orders.get_or_init(|| {
-            let b = Builder::new();
-            let wi = [b.input(), b.input(), b.input()];
-            let powers = PowerProgram::new(&b, &self.surface);
-            let (weights, tilts) = self.rgb_orders_exact(&b, &powers, wi, n_max);
-            let outputs: Vec<Value> = weights.into_iter().chain(tilts).collect();
-            let program = b.finish(&outputs);
-            let cells = ORDER_CELLS_PER_AXIS;
-            let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
-            let mut table = Vec::with_capacity(cells * cells * outputs.len());
-            let mut regs = Vec::new();
-            let mut out = vec![0.0f64; outputs.len()];
-            for iy in 0..cells {
-                for ix in 0..cells {
-                    let wi = super::sampling::within_rim(centre(ix), centre(iy));
-                    program.run_into(&[wi.x, wi.y, wi.z], &mut regs, &mut out);
-                    table.extend(
-                        out.iter()
-                            .map(|&x| if x.is_finite() { x as f32 } else { 0.0 }),
-                    );
-                }
-            }
-            table
-        });
+        let n_max = Self::sampling_order_count(period_um, RGB_BAND_NM.0)? - 2;
+        let (kept, table) = self
+            .rgb_orders
+            .get_or_init(|| (n_max, self.make_rgb_order_table(n_max)));
+        let table = if *kept == n_max {
+            Cow::Borrowed(table.as_slice())
+        } else {
+            Cow::Owned(self.make_rgb_order_table(n_max))
+        };
         Some((table, n_max))
+    }
+
+    /// `rgb_order_table` for orders -n_max..=n_max.
+    fn make_rgb_order_table(&self, n_max: usize) -> Vec<f32> {
+        let b = Builder::new();
+        let wi = [b.input(), b.input(), b.input()];
+        let powers = PowerProgram::new(&b, &self.surface);
+        let (weights, tilts) = self.rgb_orders_exact(&b, &powers, wi, n_max);
+        let outputs: Vec<Value> = weights.into_iter().chain(tilts).collect();
+        let program = b.finish(&outputs);
+        let cells = ORDER_CELLS_PER_AXIS;
+        let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
+        let mut table = Vec::with_capacity(cells * cells * outputs.len());
+        let mut regs = Vec::new();
+        let mut out = vec![0.0f64; outputs.len()];
+        for iy in 0..cells {
+            for ix in 0..cells {
+                let wi = super::sampling::within_rim(centre(ix), centre(iy));
+                program.run_into(&[wi.x, wi.y, wi.z], &mut regs, &mut out);
+                table.extend(
+                    out.iter()
+                        .map(|&x| if x.is_finite() { x as f32 } else { 0.0 }),
+                );
+            }
+        }
+        table
     }
 
     pub(super) fn sampling_program<'a>(

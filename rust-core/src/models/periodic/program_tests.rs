@@ -811,3 +811,94 @@ fn rgb_order_table_only_with_an_rgb_eval() {
         }
     }
 }
+
+/// Differentiating its period and coherence length (an optimiser moving
+/// them), a grating's programs are planned for their intervals on the
+/// planning grid (`planning_interval`: the period's top, 1.587 um here,
+/// and the coherence length's ends, 3.175 and 4 um): across the intervals
+/// every kind exports the same code (the RGB eval: across the period's),
+/// with tables of the same lengths, so that the rebuilds of an
+/// optimisation reuse Dr.Jit's compiled kernels.
+/// The orders planned beyond the material's own are never taken: the
+/// spectral programs and the RGB sampling programs give what those of the
+/// same material without gradients give (whose counts are its own: fewer
+/// operations). The RGB eval planned so is held against the native path
+/// by param_tests.rs, whose materials differentiate every parameter.
+#[test]
+fn a_differentiated_period_plans_for_its_interval() {
+    let brdf_at = |period_um: f64, coherence_um: f64, gradients: &str| {
+        Brdf::from_json(&format!(
+            r#"{{"surface": "periodic", "period_um": {period_um}, "profile": "sine", "height_um": 0.2, "coherence_um": {coherence_um}, "fresnel": 0.9, "gradients": {gradients}}}"#
+        ))
+        .unwrap()
+    };
+    let brdf = |period_um: f64, gradients: &str| brdf_at(period_um, 4.0, gradients);
+    let lengths =
+        |p: &crate::program::Program| -> Vec<usize> { p.tables.iter().map(|t| t.len()).collect() };
+    let (period, both) = (r#"["period_um"]"#, r#"["period_um", "coherence_um"]"#);
+    let corners = [
+        (brdf(1.27, period), brdf(1.55, period)),
+        (brdf_at(1.27, 3.2, both), brdf_at(1.55, 3.95, both)),
+    ];
+    for (i, (low, high)) in corners.iter().enumerate() {
+        // (The RGB eval plans the coherence length around its own value:
+        // the interval's shortest would unroll two more broad orders.)
+        for kind in ProgramKind::ALL
+            .into_iter()
+            .filter(|&k| i == 0 || k != ProgramKind::EvalRgb)
+        {
+            let (p, q) = (exported(low, kind).unwrap(), exported(high, kind).unwrap());
+            assert!(
+                p.code == q.code,
+                "{i} {kind:?}: the code changed across the interval"
+            );
+            assert_eq!(lengths(&p), lengths(&q), "{i} {kind:?}'s tables");
+        }
+    }
+    let [(low, _), _] = corners;
+    // Across the grid's step at 1.26 um the sampling programs change.
+    let below = exported(&brdf(1.25, period), ProgramKind::PdfSpectral).unwrap();
+    let pdf = exported(&low, ProgramKind::PdfSpectral).unwrap();
+    assert!(below.code.len() < pdf.code.len());
+
+    let own = brdf(1.27, "false");
+    let mut rng = crate::benchmark::SplitMix64(5);
+    for kind in [
+        ProgramKind::EvalSpectral,
+        ProgramKind::PdfSpectral,
+        ProgramKind::SampleSpectral,
+        ProgramKind::PdfRgb,
+        ProgramKind::SampleRgb,
+    ] {
+        let (planned, plain) = (exported(&low, kind).unwrap(), exported(&own, kind).unwrap());
+        if kind != ProgramKind::EvalSpectral {
+            assert!(
+                planned.code.len() > plain.code.len(),
+                "{kind:?}: no order planned"
+            );
+        }
+        let mut nonzero = 0;
+        for (i, (wi, wo)) in pairs(3000, 8).into_iter().enumerate() {
+            let [a, b, c] = rng.three();
+            let second = match kind {
+                ProgramKind::SampleSpectral | ProgramKind::SampleRgb => [a, b, c],
+                _ => [wo.x, wo.y, wo.z],
+            };
+            let mut inputs = vec![wi.x, wi.y, wi.z];
+            inputs.extend(second);
+            if kind.spectral() {
+                inputs.push(380.0 + 400.0 * (i as f64 / 3000.0));
+            }
+            let (x, y) = (run_both(&planned, &inputs), run_both(&plain, &inputs));
+            for (u, v) in x.0.iter().zip(&y.0).chain(x.1.iter().zip(&y.1)) {
+                let scale = u.abs().max(v.abs()).max(1e-30);
+                assert!(
+                    (u - v).abs() <= 1e-6 * scale,
+                    "{kind:?} at {inputs:?}: {u} against {v}"
+                );
+            }
+            nonzero += (y.1[0] != 0.0) as usize;
+        }
+        assert!(nonzero > 100, "{kind:?}: {nonzero} non-zero values");
+    }
+}
