@@ -365,6 +365,22 @@ pub(super) fn planning_interval(x: f64) -> (f64, f64) {
     }
 }
 
+/// `build` of a table with rows up to the order limit planned for the
+/// period's and the coherence length's `planning_interval` (the period's
+/// top, the coherence length's bottom), or, where that table is refused
+/// (its size limit), up to their own order limit.
+fn with_planned_rows<T>(
+    period_um: f64,
+    coherence_um: f64,
+    build: impl Fn(i64) -> Result<T, String>,
+) -> Result<T, String> {
+    let planned = physical_order_limit(
+        planning_interval(period_um).1,
+        planning_interval(coherence_um).0,
+    );
+    build(planned).or_else(|_| build(physical_order_limit(period_um, coherence_um)))
+}
+
 /// Largest |n| whose peak can reach the visible band at some direction
 /// (|u| <= 2, lambda >= 0.36 um), plus the Gaussian-tail margin of the
 /// spectral kernel for the shortest coherence length.
@@ -390,15 +406,9 @@ impl PeriodicSurface {
     ) -> Result<PeriodicSurface, String> {
         check_positive("period_um", period_um)?;
         check_positive("coherence_um", coherence_um)?;
-        // Rows for the planning period where the table stays within its
-        // size limit, else for the period's own orders.
-        let planned = physical_order_limit(
-            planning_interval(period_um).1,
-            planning_interval(coherence_um).0,
-        );
-        let own = physical_order_limit(period_um, coherence_um);
-        let model = Self::model(period_um, &profile, planned)
-            .or_else(|_| Self::model(period_um, &profile, own))?;
+        let model = with_planned_rows(period_um, coherence_um, |n_phys| {
+            Self::model(period_um, &profile, n_phys)
+        })?;
         Ok(PeriodicSurface {
             period_um,
             coherence_um,
@@ -468,13 +478,9 @@ impl PeriodicSurface {
                 "height_um_max ({height_um_max}) must be at least height_um ({height_um}) and at most 1000 um"
             ));
         }
-        let planned = physical_order_limit(
-            planning_interval(self.period_um).1,
-            planning_interval(self.coherence_um).0,
-        );
-        let own = physical_order_limit(self.period_um, self.coherence_um);
-        let table =
-            sine_table(height_um_max, planned).or_else(|_| sine_table(height_um_max, own))?;
+        let table = with_planned_rows(self.period_um, self.coherence_um, |n_phys| {
+            sine_table(height_um_max, n_phys)
+        })?;
         self.texture_table = Some((height_um_max, table));
         Ok(self)
     }
