@@ -587,6 +587,37 @@ def test_program_regions():
             pytest.fail(what)
 
 
+def test_region_profile_counts_what_each_lane_and_packet_runs():
+    """scripts/program_regions.py: on the nested regions above (x > 0 around
+    x > 1), per lane and per packet of 2, the recorded masks and the
+    operations counted are the hand-computed ones; on the compact disc's
+    RgbEval at its own sampled directions, every region runs in at least the
+    packets of its lanes and the packets run at least what the lanes need."""
+    import program_regions as R
+    code = [('Input', 0, 0, 0), ('Const', 0.0, 0, 0), ('Const', 1.0, 0, 0),
+            ('Gt', 0, 1, 0), ('If', 3, 0, 0), ('Add', 0, 2, 0), ('Gt', 0, 2, 0),
+            ('If', 6, 0, 0), ('Add', 0, 0, 0), ('EndIf', 7, 0, 0), ('Add', 5, 8, 0),
+            ('EndIf', 4, 0, 0), ('Lt', 0, 1, 0), ('Select', 12, 2, 10)]
+    p = stam_core.decode_program(_assemble(1, code, [10, 13, 5]))
+    x = np.array([[-1.0], [0.5], [2.0], [np.nan]], dtype=np.float32)
+    r = R.profile_program(p, x, np.ones(4, bool), packet=2)
+    # outer region: lanes 1, 2 (packets 0, 1); inner: lane 2 (packet 1)
+    assert r['regions'] == [(4, 6, 0.5, 1.0), (7, 1, 0.25, 0.5)]
+    # 6 operations outside regions, 3 of the outer's own, 1 of the inner's:
+    # lanes need 6, 9, 10, 6; packets run 9 and 10 for two lanes each
+    assert (r['ops'], r['top']) == (14, 6)
+    assert r['per_lane'] == pytest.approx(31 / 4) and r['per_packet'] == pytest.approx(9.5)
+    r = R.profile_program(p, x, np.array([True, False, True, True]), packet=2)
+    assert r['per_lane'] == pytest.approx(22 / 3) and r['idle'] == 0.25
+    with stam_core.Brdf({'surface': 'cd'}) as cd:
+        r = R.profile(cd, R.KINDS['eval_rgb'], lanes=4096)
+        code = stam_core.decode_program(R.program(cd, R.KINDS['eval_rgb'])).code
+    assert len(r['regions']) == sum(1 for c in code if stam_core.PROGRAM_OPS[c[0]] == 'If')
+    assert all(0 <= lane <= pack <= 1 for _, _, lane, pack in r['regions'])
+    assert any(lane > 0 for _, _, lane, _ in r['regions'][1:])
+    assert r['per_packet'] >= r['per_lane'] > r['top'] * 0.5
+
+
 def test_program_parameters():
     """Param reads its slot of the parameter section (the stored value, or
     run_program's params= override, the same for every lane); decode_program
