@@ -111,7 +111,9 @@ def relative_noise(a, b):
 def render_one(name, scene_file, variant, params, percentile, out_dir, seed=0):
     mi = stam_mitsuba.setup(variant)
     studio_env.write()
-    scene = mi.load_file(os.path.join(SCENES_DIR, scene_file),
+    # Loaded in order, so that a scene's kernels are the same from run to run
+    # and come from Dr.Jit's cache (docs/guide.md)
+    scene = mi.load_file(os.path.join(SCENES_DIR, scene_file), parallel=False,
                          **{k: v for k, v in params.items()})
     t0 = time.time()
     img = np.array(mi.render(scene, seed=seed), dtype=np.float32)
@@ -162,7 +164,8 @@ def main(argv=None):
         note = ''
         if args.noise:
             mi = stam_mitsuba.setup(variant)
-            scene = mi.load_file(os.path.join(SCENES_DIR, scene_file), **params)
+            scene = mi.load_file(os.path.join(SCENES_DIR, scene_file), parallel=False,
+                                 **params)
             other = np.array(mi.render(scene, seed=1), dtype=np.float32)
             note = ', noise %.1f %%' % (100 * relative_noise(img, other))
         print(' %.1f s%s' % (dt, note), flush=True)

@@ -54,6 +54,16 @@ def scene_dict(shapes, integrator='path', res=32, spp=4):
     return d
 
 
+def load_model_scene(variant):
+    """The scene of `model_shapes`, loaded in order (parallel=False): a
+    symbolic call traces the variant's BSDFs in the order of their registry
+    ids, which a parallel load hands out as its threads finish, so that the
+    render's kernel (101,494 operations in llvm_ad_rgb, a minute of LLVM)
+    would differ from one load to the next and miss Dr.Jit's cache; loaded
+    in order, every test and process here renders the same kernel."""
+    return mi.load_dict(scene_dict(model_shapes(variant)), parallel=False)
+
+
 def model_shapes(variant):
     """One shape per surface model: a concentric compact
     disc on a disk (the frame from the shape's type), a Gaussian sphere, a
@@ -82,7 +92,7 @@ def model_shapes(variant):
 @pytest.mark.parametrize('variant', JIT_VARIANTS)
 def test_symbolic_render_equals_the_evaluated_one(variant):
     use(variant)
-    scene = mi.load_dict(scene_dict(model_shapes(variant)))
+    scene = load_model_scene(variant)
     img = to_np(mi.render(scene, seed=3))
     # Spectral: a grating's nearly monochromatic light lies outside the sRGB
     # gamut (a negative channel), but its luminance is not negative
@@ -117,7 +127,7 @@ def skip_unless_mitsuba_freezes_renders():
 def test_frozen_render_replays(variant):
     use(variant)
     skip_unless_mitsuba_freezes_renders()
-    scene = mi.load_dict(scene_dict(model_shapes(variant)))
+    scene = load_model_scene(variant)
     plain = to_np(mi.render(scene, seed=1))
 
     @dr.freeze
