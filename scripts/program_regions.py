@@ -4,7 +4,7 @@ A program's regions (If .. EndIf, docs/jit.md) run inside `dr::if_stmt`,
 which on Dr.Jit's LLVM backend skips a packet of W lanes (8 with AVX2 f32,
 16 with AVX-512) only where none of its lanes needs the region. This script
 runs a program on the CPU (the core's reference executor,
-`stam_diffraction.core.run_program`, which records each region's mask) at the
+`stam_diffraction.core.run_program`, which reports each region's mask) at the
 directions a renderer asks for (its own SAMPLE program's directions, or
 uniform ones) and prints, per region, its length in operations and the
 fraction of lanes and of packets that run it, then the operations executed
@@ -21,7 +21,6 @@ Usage: python scripts/program_regions.py --material '{"surface": "cd"}'
        [--incidence coherent|random] [--packet 8] [--lanes 32768]
 """
 import argparse
-import inspect
 import json
 import os
 import sys
@@ -32,30 +31,22 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'python'))
 from stam_diffraction import core  # noqa: E402
 
-KINDS = {'eval_rgb': 0, 'eval_spectral': 1, 'pdf_rgb': 2, 'pdf_spectral': 3}
-SAMPLE_OF = {False: 4, True: 5}   # SAMPLE_RGB, SAMPLE_SPECTRAL
-
-
-def _recording_executor():
-    """core.run_program, with each region's mask recorded at its If: a copy
-    of the reference executor's source with one statement added, so that the
-    masks are exactly the executor's."""
-    src = inspect.getsource(core.run_program).replace('def run_program(', 'def _run_recorded(')
-    hook = 'masks.append(masks[-1] & r[a] if masks else r[a])'
-    if src.count(hook) != 1:
-        raise RuntimeError('program_regions: core.run_program no longer opens regions '
-                           'as this script expects; update its hook')
-    src = src.replace(hook, hook + '; _RECORDED.append((len(regs), masks[-1]))')
-    scope = dict(vars(core))
-    scope['_RECORDED'] = []
-    exec(compile(src, core.__file__, 'exec'), scope)
-    return scope['_run_recorded'], scope['_RECORDED']
+KINDS = {'eval_rgb': core.PROGRAM_EVAL_RGB, 'eval_spectral': core.PROGRAM_EVAL_SPECTRAL,
+         'pdf_rgb': core.PROGRAM_PDF_RGB, 'pdf_spectral': core.PROGRAM_PDF_SPECTRAL}
+SPECTRAL = (core.PROGRAM_EVAL_SPECTRAL, core.PROGRAM_PDF_SPECTRAL)
+SAMPLE_OF = {False: core.PROGRAM_SAMPLE_RGB, True: core.PROGRAM_SAMPLE_SPECTRAL}
 
 
 def program(brdf, kind):
     """The program a renderer runs for a material at its built values."""
     a = brdf.export_program(kind + core.PROGRAM_AT_BUILT)
     return brdf.export_program(kind) if a is None else a
+
+
+def direction(cos, phi):
+    """Unit directions of polar cosines and azimuths."""
+    sin = np.sqrt(1.0 - cos * cos)
+    return np.stack([sin * np.cos(phi), sin * np.sin(phi), cos], -1)
 
 
 def incident(n, rng, coherent):
@@ -65,15 +56,14 @@ def incident(n, rng, coherent):
         # neighbouring lanes, neighbouring incidences: sorted along rings
         order = np.lexsort((phi, np.round(cos * 64)))
         cos, phi = cos[order], phi[order]
-    sin = np.sqrt(1.0 - cos * cos)
-    return np.stack([sin * np.cos(phi), sin * np.sin(phi), cos], -1)
+    return direction(cos, phi)
 
 
 def inputs(brdf, kind, lanes, at, coherent, seed=1):
     """(wi, wo[, lambda]) lanes for a program kind: wo from the material's
     own SAMPLE program (glossy samples above the horizon) or uniform."""
     rng = np.random.default_rng(seed)
-    spectral = kind in (1, 3)
+    spectral = kind in SPECTRAL
     wi = incident(lanes, rng, coherent)
     lam = rng.uniform(360.0, 830.0, lanes)
     if at == 'sampled':
@@ -86,10 +76,7 @@ def inputs(brdf, kind, lanes, at, coherent, seed=1):
         # by a renderer: its lane idles in the packet
         keep = (out[:, 3] == 0) & (wo[:, 2] > 0)
     else:
-        cos = rng.uniform(0.0, 1.0, lanes)
-        phi = rng.uniform(0.0, 2.0 * np.pi, lanes)
-        s = np.sqrt(1.0 - cos * cos)
-        wo = np.stack([s * np.cos(phi), s * np.sin(phi), cos], -1)
+        wo = direction(rng.uniform(0.0, 1.0, lanes), rng.uniform(0.0, 2.0 * np.pi, lanes))
         keep = np.ones(lanes, bool)
     x = np.concatenate([wi, wo], -1)
     if spectral:
@@ -109,8 +96,8 @@ def profile_program(p, x, keep, packet):
     n = len(x)
     if n % packet:
         raise ValueError('program_regions: %d lanes are not whole packets of %d' % (n, packet))
-    run, recorded = _recording_executor()
-    run(p, x)
+    recorded = []
+    core.run_program(p, x, on_region=lambda position, mask: recorded.append((position, mask)))
     ops = [core.PROGRAM_OPS[c[0]] for c in p.code]
     end, stack = {}, []
     for i, o in enumerate(ops):

@@ -575,7 +575,7 @@ def _fma32(a, b, c):
     return s.astype(np.float32)
 
 
-def run_program(program, inputs, params=None):
+def run_program(program, inputs, params=None, on_region=None):
     """Runs a program (an array of Brdf.export_program, or a decoded
     Program) on lanes of inputs (..., n_inputs): float32 outputs (...,
     n_outputs). params: {name: value} overriding the values the program's
@@ -592,7 +592,10 @@ def run_program(program, inputs, params=None):
     rounded but for rare ties, as the C library's float32 functions the
     core calls are to within an ulp. A region (If .. EndIf) is computed on
     every lane and its registers set to 0 (False) on the lanes its masks
-    exclude, which is what skipping them gives."""
+    exclude, which is what skipping them gives. on_region(position, mask),
+    where given, is called at each If with its position in the code and the
+    lanes it holds on (its mask and every enclosing one's; scripts/
+    program_regions.py counts what a SIMD packet runs from them)."""
     p = program if isinstance(program, Program) else decode_program(program)
     x = np.asarray(inputs, dtype=np.float32)
     if x.ndim == 0 or x.shape[-1] != p.n_inputs:
@@ -634,6 +637,8 @@ def run_program(program, inputs, params=None):
             if name in ('If', 'EndIf'):
                 if name == 'If':
                     masks.append(masks[-1] & r[a] if masks else r[a])
+                    if on_region is not None:
+                        on_region(len(regs), masks[-1])
                 else:
                     masks.pop()
                 regs.append(np.zeros((), f32))
