@@ -48,6 +48,7 @@
 // the same way as an out-of-range value.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+mod hermite;
 mod orders;
 #[cfg(test)]
 mod param_tests;
@@ -70,6 +71,7 @@ use crate::optics::fresnel::{Fresnel, NodeReflectance};
 use crate::optics::geometry::PairGeometry;
 use crate::sampling::{Component, Components};
 use crate::special::{fast_exp, fast_exp_vectorisable, sin_squared};
+use hermite::quintic_hermite_basis;
 use num_complex::Complex64;
 use orders::{bessel_j_row, dft_coefficient, sine_table, tabulated_table};
 use std::f64::consts::PI;
@@ -320,16 +322,9 @@ impl OrderTable {
         let a = &self.data[j * stride + col];
         let b = &self.data[(j + 1) * stride + col];
         let h = self.step;
-        let t2 = t * t;
-        let t3 = t2 * t;
-        let t4 = t3 * t;
-        let t5 = t4 * t;
-        let h0 = 1.0 - 10.0 * t3 + 15.0 * t4 - 6.0 * t5;
-        let h1 = (t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5) * h;
-        let h2 = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5) * h * h;
-        let h3 = 10.0 * t3 - 15.0 * t4 + 6.0 * t5;
-        let h4 = (-4.0 * t3 + 7.0 * t4 - 3.0 * t5) * h;
-        let h5 = 0.5 * (t3 - 2.0 * t4 + t5) * h * h;
+        let [h0, h1, h2, h3, h4, h5] = quintic_hermite_basis(t, 1.0 - t);
+        let (h1, h4) = (h1 * h, h4 * h);
+        let (h2, h5) = (0.5 * h2 * h * h, 0.5 * h5 * h * h);
         let c = a[0] * h0 + a[1] * h1 + a[2] * h2 + b[0] * h3 + b[1] * h4 + b[2] * h5;
         Some(c.norm_sqr())
     }

@@ -464,14 +464,9 @@ const SLOPE_MU_T: usize = 3;
 /// Cubic Hermite basis at f in [0, 1] (for values p0, p1 and slopes m0, m1
 /// per unit step), and its derivative.
 fn hermite<'a>(f: Value<'a>) -> ([Value<'a>; 4], [Value<'a>; 4]) {
-    let (f2, f3) = (f * f, f * f * f);
+    let f2 = f * f;
     (
-        [
-            f3 * 2.0 - f2 * 3.0 + 1.0,
-            f3 - f2 * 2.0 + f,
-            f2 * 3.0 - f3 * 2.0,
-            f3 - f2,
-        ],
+        super::hermite::cubic_hermite_basis(f, 1.0 - f),
         [
             f2 * 6.0 - f * 6.0,
             f2 * 3.0 - f * 4.0 + 1.0,
@@ -653,19 +648,8 @@ impl PowerProgram {
                 symmetric,
                 complex,
             } => {
-                let pos = (beta + super::BETA_MAX) * (1.0 / step);
-                let inside = pos.ge(0.0) & pos.le((*n_beta - 1) as f64);
-                let pos = inside.select(pos, 0.0);
-                let j = pos.floor().min((*n_beta - 2) as f64);
-                let t = pos - j;
-                let t2 = t * t;
-                let t3 = t2 * t;
-                let h = [
-                    t3 * 2.0 - t2 * 3.0 + 1.0,
-                    t3 - t2 * 2.0 + t,
-                    t2 * 3.0 - t3 * 2.0,
-                    t3 - t2,
-                ];
+                let (j, t, s, inside) = super::program::table_cell(beta, *step, *n_beta);
+                let h = super::hermite::cubic_hermite_basis(t, s);
                 let width = if *complex { 6.0 } else { 3.0 };
                 let stride = (n_hi - n_lo + 1) as f64 * width;
                 let col = if *symmetric { n.abs() } else { n } - *n_lo as f64;
