@@ -195,8 +195,9 @@ def check_freeze(mi, dr, scenes, spp):
         print('[gpu_check] freeze: skipped, Mitsuba %s cannot freeze a render in %s without '
               'the plugin either: %s' % (mi.__version__, mi.variant(), why), flush=True)
         return []
-    # rendered before the recording: Mitsuba's first render of a scene sets
-    # state (the sampler's) that a recording made before it records again for
+    # rendered before the recording: recorded before any plain render of the
+    # scene, the second call recorded again (llvm_ad_rgb, 2 recordings; the
+    # tests' frozen renders, tests/test_jit_render.py, also render first)
     plain = np.array(mi.render(scenes['gaussian'], spp=spp, seed=2))
     frozen = dr.freeze(lambda scene, seed: mi.render(scene, spp=spp, seed=seed))
     # opaque seeds: a literal's value is part of the recording's key
