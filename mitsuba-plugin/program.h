@@ -358,37 +358,6 @@ template <typename Float> struct ParamInputs {
     }
 };
 
-/// The programs' sin, cos, exp and log. On CUDA, Dr.Jit's single-precision
-/// dr::sin/cos/exp/log run on the GPU's multi-function unit, whose error is
-/// absolute (sin: ~5e-7 over [-pi, pi]): a relative error of 3e-4 in a
-/// grating's sin^2 at the small phases of grazing directions (measured on
-/// an H200, docs/jit.md). The programs take Dr.Jit's polynomial versions
-/// there, the ones the LLVM backend runs.
-template <typename Float> Float program_sin(const Float &x) {
-    if constexpr (dr::is_cuda_v<Float>)
-        return dr::sin<Float, false>(x);
-    else
-        return dr::sin(x);
-}
-template <typename Float> Float program_cos(const Float &x) {
-    if constexpr (dr::is_cuda_v<Float>)
-        return dr::cos<Float, false>(x);
-    else
-        return dr::cos(x);
-}
-template <typename Float> Float program_exp(const Float &x) {
-    if constexpr (dr::is_cuda_v<Float>)
-        return dr::exp<Float, false>(x);
-    else
-        return dr::exp(x);
-}
-template <typename Float> Float program_log(const Float &x) {
-    if constexpr (dr::is_cuda_v<Float>)
-        return dr::log<Float, false>(x);
-    else
-        return dr::log(x);
-}
-
 template <typename Float> class Program {
 public:
     using Mask = dr::mask_t<Float>;
@@ -526,6 +495,13 @@ private:
                 continue;
             }
             const Float &fa = f[in.a], &fb = f[in.b], &fc = f[in.c];
+            // sin, cos, exp and log: on CUDA, Dr.Jit's native f32 versions run
+            // on the GPU's multi-function unit, whose error is absolute (sin:
+            // ~5e-7 over [-pi, pi]), a relative error of 3e-4 in a grating's
+            // sin^2 at the small phases of grazing directions (measured on an
+            // H200, docs/jit.md); there the programs take Dr.Jit's polynomial
+            // versions, the ones the LLVM backend runs.
+            constexpr bool native = !dr::is_cuda_v<Float>;
             switch (in.op) {
                 case Op::Input: f[i] = inputs[in.a]; break;
                 case Op::Const: f[i] = Float(in.value); break;
@@ -539,10 +515,10 @@ private:
                 case Op::Neg: f[i] = -fa; break;
                 case Op::Abs: f[i] = dr::abs(fa); break;
                 case Op::Sqrt: f[i] = dr::sqrt(fa); break;
-                case Op::Exp: f[i] = program_exp(fa); break;
-                case Op::Log: f[i] = program_log(fa); break;
-                case Op::Sin: f[i] = program_sin(fa); break;
-                case Op::Cos: f[i] = program_cos(fa); break;
+                case Op::Exp: f[i] = dr::exp<Float, native>(fa); break;
+                case Op::Log: f[i] = dr::log<Float, native>(fa); break;
+                case Op::Sin: f[i] = dr::sin<Float, native>(fa); break;
+                case Op::Cos: f[i] = dr::cos<Float, native>(fa); break;
                 case Op::Atan2: f[i] = dr::atan2(fa, fb); break;
                 case Op::Floor: f[i] = dr::floor(fa); break;
                 case Op::Lt: m[i] = fa < fb; break;
