@@ -42,6 +42,7 @@ import stam_accuracy as acc  # noqa: E402
 import stam_diffraction  # noqa: E402,F401  (plugin path, LLVM, Dr.Jit cache)
 from stam_diffraction import core as stam_core  # noqa: E402
 import stam_materials  # noqa: E402
+import stam_mitsuba  # noqa: E402
 
 WAVELENGTHS = (450.0, 520.0, 590.0, 660.0)
 # The issue's tolerances (scripts/stam_accuracy.py): spectral 1e-4 relative,
@@ -176,24 +177,13 @@ def check_chi2(mi, dr, quick):
     return failed
 
 
-def freeze_skip_reason(mi, dr, scene):
-    """Mitsuba's own error where it cannot freeze a render of `scene` (which
-    holds no diffraction BSDF) in this variant, else None."""
-    frozen = dr.freeze(lambda scene_, seed: mi.render(scene_, spp=1, seed=seed))
-    try:
-        dr.eval(frozen(scene, dr.opaque(mi.UInt32, 1)))
-    except RuntimeError as e:
-        return str(e).strip().splitlines()[0][:200]
-    return None
-
-
 def check_freeze(mi, dr, scenes, spp):
     """A dr.freeze-d render of the Gaussian scene, recorded once and replayed
     with another seed, equals the plain render."""
-    why = freeze_skip_reason(mi, dr, scenes['roughconductor'])
+    why = stam_mitsuba.freeze_failure(scenes['roughconductor'], spp=1)
     if why is not None:
         print('[gpu_check] freeze: skipped, Mitsuba %s cannot freeze a render in %s without '
-              'the plugin either: %s' % (mi.__version__, mi.variant(), why), flush=True)
+              'the plugin either: %s' % (mi.__version__, mi.variant(), why[:200]), flush=True)
         return []
     # rendered before the recording: recorded before any plain render of the
     # scene, the second call recorded again (llvm_ad_rgb, 2 recordings; the

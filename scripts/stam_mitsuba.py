@@ -28,6 +28,25 @@ PROJECT_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(PROJECT_DIR, 'python'))
 import stam_diffraction  # noqa: E402
 
+def freeze_failure(scene, spp=0):
+    """Mitsuba's own error, its messages joined, where it cannot record a
+    dr.freeze-d render of `scene` (one without the plugin) in the current
+    variant (3.9.1, spectral variants: its CIE table is not traversed);
+    None where it can. spp 0: the scene's own."""
+    import drjit as dr
+    import mitsuba as mi
+    frozen = dr.freeze(lambda scene_, seed: mi.render(scene_, spp=spp, seed=seed))
+    try:
+        dr.eval(frozen(scene, dr.opaque(mi.UInt32, 1)))
+    except RuntimeError as e:
+        msgs = []
+        while e is not None:
+            msgs.append(str(e).strip())
+            e = e.__cause__ or e.__context__
+        return ' '.join(msgs)
+    return None
+
+
 def setup(variant='scalar_rgb'):
     """Select `variant` for type="diffraction"; returns `mitsuba`."""
     if not os.path.exists(stam_diffraction.PLUGIN):

@@ -27,6 +27,7 @@ from test_jit import (  # noqa: E402  (the shared helpers; importing sets up the
     CHI2_SURFACES, JIT_VARIANTS, ROOT, SURFACES, WAVELENGTHS, make_si, programs, report,
     symbolic, to_np, use)
 import stam_materials  # noqa: E402
+import stam_mitsuba  # noqa: E402
 from test_plugin import density_adapter, glossy_ctx  # noqa: E402
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
@@ -112,15 +113,10 @@ def skip_unless_mitsuba_freezes_renders():
     is not traversed): skip where a scene without the plugin fails."""
     scene = mi.load_dict(scene_dict({'ball': {'type': 'sphere', 'bsdf': {
         'type': 'roughconductor'}}}, res=8, spp=1))
-
-    @dr.freeze
-    def frozen(scene_, seed):
-        return mi.render(scene_, seed=seed)
-    try:
-        dr.eval(frozen(scene, dr.opaque(mi.UInt32, 1)))
-    except RuntimeError as e:
+    why = stam_mitsuba.freeze_failure(scene)
+    if why is not None:
         pytest.skip('Mitsuba %s cannot freeze a render in %s, without the plugin too: %s'
-                    % (mi.__version__, mi.variant(), ' '.join(error_chain(e))[:300]))
+                    % (mi.__version__, mi.variant(), why[:300]))
 
 
 @pytest.mark.parametrize('variant', JIT_VARIANTS)
