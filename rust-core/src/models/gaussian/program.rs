@@ -57,6 +57,9 @@ const MIRROR_LOBE: f64 = 0.3;
 /// Share of the lobe probability of the horizon twin (isotropic surfaces,
 /// near the rim) for smooth surfaces (times e^-g_far).
 const TWIN_SHARE: f64 = 0.8;
+/// The twin's largest share below which the programs leave it out (it
+/// then changes the lobes' density by less than this fraction).
+const TWIN_NEGLIGIBLE: f64 = 1e-4;
 /// Share of the non-coherent probability of the defensive part (half
 /// cosine, half uniform), as the core's strategies.
 const DEFENSIVE: f64 = crate::sampling::DEFENSIVE_FRACTION;
@@ -397,6 +400,17 @@ impl Gaussian {
         p_coh.min(1.0 - 1e-6)
     }
 
+    /// Whether the horizon twin can take a share of TWIN_NEGLIGIBLE or
+    /// more anywhere in the band: its share is TWIN_SHARE e^-(k sigma)^2,
+    /// largest at the longest wavelength; with a sigma texture sigma may be
+    /// anything, so the twin stays. Where it cannot, the programs leave it
+    /// out, sample and pdf alike (it was a third of a spectral rough
+    /// surface's render time, docs/plugin_speed.md).
+    fn twin_matters(&self) -> bool {
+        let kf = wavenumber_per_um(LAMBDA_MAX_NM) * self.surface.sigma_um;
+        self.sigma_um_max.is_some() || TWIN_SHARE * (-(kf * kf)).exp() >= TWIN_NEGLIGIBLE
+    }
+
     /// The strategy at unit wi (above the horizon) for the wavelength
     /// `lambda_nm`; RGB (None): the lobe at RGB_SAMPLING_NM, the coherent
     /// probability the mean over the RGB band (as the core's RGB
@@ -435,7 +449,7 @@ impl Gaussian {
         // where g grows tenfold inwards the real lobe is much wider (the
         // core widens its defensive share there instead); the lobe frozen
         // at the mirror keeps the rest of its share.
-        let (twin, frozen_share) = if s.isotropic {
+        let (twin, frozen_share) = if s.isotropic && self.twin_matters() {
             let sd = (m_mean * 2.0).sqrt() / (k * b.built(s.corr_x_um));
             let to_rim = 1.0 - (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
             let near = series & to_rim.lt(sd * 2.0);
