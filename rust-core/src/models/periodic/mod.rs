@@ -90,6 +90,9 @@ pub struct Periodic {
     /// incident direction (program_sampling.rs), made on the first build,
     /// with its n_max.
     rgb_orders: OnceLock<(usize, Vec<f32>)>,
+    /// The spectral sampling programs' order weights over the incident
+    /// direction and the wavelength, with its n_max (None: none made).
+    spectral_orders: OnceLock<Option<(usize, Vec<f32>)>>,
 }
 
 impl Periodic {
@@ -107,6 +110,7 @@ impl Periodic {
             ),
             grating: OnceLock::new(),
             rgb_orders: OnceLock::new(),
+            spectral_orders: OnceLock::new(),
         })
     }
 

@@ -922,6 +922,12 @@ fn a_differentiated_period_plans_for_its_interval() {
                 "{kind:?}: no order planned"
             );
         }
+        // The plain spectral sampling programs read the orders' weights
+        // from the table made at the built period (`spectral_order_table`),
+        // the planned ones compute them (they follow the period): two
+        // strategies, each with its exact density, so only the others'
+        // values are compared.
+        let same_strategy = !matches!(kind, ProgramKind::PdfSpectral | ProgramKind::SampleSpectral);
         let mut nonzero = 0;
         for (i, (wi, wo)) in pairs(3000, 8).into_iter().enumerate() {
             let [a, b, c] = rng.three();
@@ -935,6 +941,10 @@ fn a_differentiated_period_plans_for_its_interval() {
                 inputs.push(380.0 + 400.0 * (i as f64 / 3000.0));
             }
             let (x, y) = (run_both(&planned, &inputs), run_both(&plain, &inputs));
+            nonzero += (y.1[0] != 0.0) as usize;
+            if !same_strategy {
+                continue;
+            }
             for (u, v) in x.0.iter().zip(&y.0).chain(x.1.iter().zip(&y.1)) {
                 let scale = u.abs().max(v.abs()).max(1e-30);
                 assert!(
@@ -942,7 +952,6 @@ fn a_differentiated_period_plans_for_its_interval() {
                     "{kind:?} at {inputs:?}: {u} against {v}"
                 );
             }
-            nonzero += (y.1[0] != 0.0) as usize;
         }
         assert!(nonzero > 100, "{kind:?}: {nonzero} non-zero values");
     }
