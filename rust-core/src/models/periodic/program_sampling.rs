@@ -131,8 +131,8 @@ const ORDER_CELLS_PER_AXIS: usize = 32;
 
 /// The spectral order table (`spectral_order_table`): cells per axis over
 /// (wi.x, wi.y), wavelength nodes evenly over the renderer's band
-/// (360-830 nm: 29 nm apart), and its largest size in values (4 MB, the
-/// native grating table's budget; the compact disc's is 666k values).
+/// (360-830 nm: 29 nm apart), and its largest size in values (8 MB; the
+/// compact disc's, 27 orders, is 1.06M values, 4.2 MB).
 /// Cells per axis, measured with the sampling_variance example (compact
 /// disc, 550 nm, JIT / core variance at 30 and 70 degrees and cos_i 0.08):
 /// 32: 1.00, 1.55, 0.72; 48: 1.03, 1.15, 0.92; 64: 1.03, 1.18, 1.12; the
@@ -143,7 +143,7 @@ const SPECTRAL_TABLE_BAND_NM: (f64, f64) = (
     crate::spectrum::LAMBDA_MIN_NM,
     crate::spectrum::LAMBDA_MAX_NM,
 );
-const SPECTRAL_TABLE_MAX: usize = 1 << 20;
+const SPECTRAL_TABLE_MAX: usize = 1 << 21;
 
 /// A lane's place in the spectral order table: its cell's row at the
 /// wavelength node below lambda (offset to order 0) and the fraction
