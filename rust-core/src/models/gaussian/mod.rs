@@ -81,6 +81,10 @@ pub struct Gaussian {
     /// The RGB program's table (`program.rs`), built on the first export
     /// of the RGB eval program.
     rgb_program: OnceLock<Option<Box<program::RgbProgramTable>>>,
+    /// The sampling programs' iterative fits over the incidence cosine and
+    /// the wavelength (`program::FitTable`), made on the first export of a
+    /// sampling program; None where they cannot use one.
+    fit_table: OnceLock<Option<program::FitTable>>,
     /// A sigma texture's largest value (`sigma_um_max`): the programs then
     /// read sigma as a parameter everywhere (the renderer gives it per
     /// point) and their tables serve every sigma up to it.
@@ -108,6 +112,7 @@ impl Gaussian {
             albedo: OnceLock::new(),
             strategies: OnceLock::new(),
             rgb_program: OnceLock::new(),
+            fit_table: OnceLock::new(),
             sigma_um_max: None,
         }
     }

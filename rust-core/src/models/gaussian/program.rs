@@ -43,7 +43,7 @@ use crate::optics::program::{PairProgram, Vec3};
 use crate::program::lookup::bspline_weights;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
 use crate::sampling::program::{cosine_density_program, cosine_direction_program};
-use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM};
+use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use std::f64::consts::PI;
 
 /// Mirror roughness exponent below which the sampling lobe is the series'
@@ -233,6 +233,72 @@ impl<'a> TermMixture<'a> {
     }
 }
 
+/// The sampling strategy's iterative fits of an isotropic surface, which
+/// are functions of the incidence cosine and the wavenumber alone: the
+/// mode of `slope_lobes`' Laplace fit (three Newton steps) and the horizon
+/// twin's alpha law (four Newton steps, eight sines and cosines), made by
+/// running those steps on the CPU at FIT_COS_NODES x FIT_LAMBDA_NODES
+/// nodes (uniform in ln cos_i and in lambda). The programs read them
+/// bilinearly (4 gathers per value) in place of the steps, which a
+/// spectral strategy runs at each of a path's four wavelengths. Sample and
+/// pdf read the same values, so the pdf stays exact; the fits only steer.
+/// Anisotropic surfaces (the fit depends on the azimuth) and sigma
+/// textures (sigma varies per point) keep the steps.
+pub(crate) struct FitTable {
+    /// Per node (cos_i major): the mode, then the twin's mean and sd where
+    /// the material has a twin.
+    values: Vec<f32>,
+    width: usize,
+}
+
+const FIT_COS_NODES: usize = 33;
+const FIT_MIN_COS: f64 = 1e-3;
+const FIT_LAMBDA_NODES: usize = 17;
+const FIT_BAND_NM: (f64, f64) = (LAMBDA_MIN_NM, LAMBDA_MAX_NM);
+
+impl FitTable {
+    fn build(model: &Gaussian) -> Option<FitTable> {
+        let s = &model.surface;
+        if !s.isotropic || model.sigma_um_max.is_some() {
+            return None;
+        }
+        let twin = model.twin_matters();
+        // The strategy's own code with the steps, at wi = (sin, 0, cos).
+        let b = Builder::at_built_values();
+        let (cos_i, lambda) = (b.input(), b.input());
+        let wi = [(1.0 - cos_i * cos_i).max(0.0).sqrt(), b.c(0.0), cos_i];
+        let k = (2000.0 * PI) / lambda;
+        let a = k * model.sigma_times(&b, 2.0) * cos_i;
+        let g0 = a * a;
+        let series = g0.lt(SERIES_MAX_G);
+        let (_, m_mean, mode) = model.slope_lobes(&b, wi, k, g0, series, None);
+        let mut outputs = vec![mode];
+        if twin {
+            let sd = (m_mean * 2.0).sqrt() / (k * b.built(s.corr_x_um));
+            let t = TwinLobe::new(wi, sd, (-g0).exp());
+            outputs.extend([t.mean, t.sd]);
+        }
+        let program = b.finish(&outputs);
+        let width = outputs.len();
+        let mut values = Vec::with_capacity(FIT_COS_NODES * FIT_LAMBDA_NODES * width);
+        let (mut regs, mut out) = (Vec::new(), vec![0.0; width]);
+        let (lo, hi) = FIT_BAND_NM;
+        for i in 0..FIT_COS_NODES {
+            let t = i as f64 / (FIT_COS_NODES - 1) as f64;
+            let c = (FIT_MIN_COS.ln() * (1.0 - t)).exp();
+            for j in 0..FIT_LAMBDA_NODES {
+                let l = lo + (hi - lo) * j as f64 / (FIT_LAMBDA_NODES - 1) as f64;
+                program.run_into(&[c, l], &mut regs, &mut out);
+                values.extend(
+                    out.iter()
+                        .map(|&v| if v.is_finite() { v as f32 } else { 0.0 }),
+                );
+            }
+        }
+        Some(FitTable { values, width })
+    }
+}
+
 /// The core's horizon twin (`sampling::HorizonLobe`): with (x', y') the
 /// plane coordinates along and across the mirror point and x' = R cos
 /// alpha, R = sqrt(1 - y'^2), z = R sin alpha, d omega = d alpha dy'; y' ~
@@ -250,11 +316,8 @@ impl<'a> TwinLobe<'a> {
     /// `sampling::HorizonLobe::new` for an isotropic lobe of plane sd `s`
     /// (`alpha_law` with four Newton steps).
     fn new(wi: Vec3<'a>, s: Value<'a>, tilt: Value<'a>) -> TwinLobe<'a> {
-        let rho0 = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        let (rho0, along) = Self::frame(wi);
         let cos_i = wi[2];
-        let off = rho0.gt(1e-12);
-        let inv = 1.0 / rho0.max(1e-12);
-        let along = [off.select(-wi[0] * inv, 1.0), off.select(-wi[1] * inv, 0.0)];
         let s2 = s * s;
         // alpha from acos(rho0) (r = 1 > rho0 above the horizon).
         let mut alpha = cos_i.atan2(rho0);
@@ -285,6 +348,27 @@ impl<'a> TwinLobe<'a> {
             mean: alpha,
             sd,
         }
+    }
+
+    /// The twin with its alpha law's mean and sd given (the fit table's).
+    fn fitted(wi: Vec3<'a>, s: Value<'a>, mean: Value<'a>, sd: Value<'a>) -> TwinLobe<'a> {
+        TwinLobe {
+            along: Self::frame(wi).1,
+            s,
+            mean,
+            sd: sd.clamp(1e-9, PI),
+        }
+    }
+
+    /// |wi_xy| and the unit vector along the mirror point (-wi_xy).
+    fn frame(wi: Vec3<'a>) -> (Value<'a>, [Value<'a>; 2]) {
+        let rho0 = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        let off = rho0.gt(1e-12);
+        let inv = 1.0 / rho0.max(1e-12);
+        (
+            rho0,
+            [off.select(-wi[0] * inv, 1.0), off.select(-wi[1] * inv, 0.0)],
+        )
     }
 
     /// The direction from two standard normals; below the horizon when the
@@ -400,6 +484,50 @@ impl Gaussian {
         p_coh.min(1.0 - 1e-6)
     }
 
+    /// The fit table's values at cos_i and lambda (the mode of
+    /// `slope_lobes`, the twin's mean and sd), bilinear in (ln cos_i,
+    /// lambda); None where the material has no table.
+    fn fit_values<'a>(
+        &self,
+        b: &'a Builder,
+        cos_i: Value<'a>,
+        lambda: Value<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        let t = self
+            .fit_table
+            .get_or_init(|| FitTable::build(self))
+            .as_ref()?;
+        let table = b.table(t.values.clone());
+        let u = (1.0 - cos_i.clamp(FIT_MIN_COS, 1.0).ln() * (1.0 / FIT_MIN_COS.ln()))
+            * (FIT_COS_NODES - 1) as f64;
+        let i = u.floor().min((FIT_COS_NODES - 2) as f64);
+        let fi = u - i;
+        let (lo, hi) = FIT_BAND_NM;
+        let x = ((lambda - lo) * (1.0 / (hi - lo))).clamp(0.0, 1.0) * (FIT_LAMBDA_NODES - 1) as f64;
+        let j = x.floor().min((FIT_LAMBDA_NODES - 2) as f64);
+        let fj = x - j;
+        let width = t.width as f64;
+        let base = (i * FIT_LAMBDA_NODES as f64 + j) * width;
+        let values = std::array::from_fn(|l| {
+            if l >= t.width {
+                return b.c(0.0);
+            }
+            let at = |di: usize, dj: usize| {
+                b.gather(
+                    table,
+                    base + ((di * FIT_LAMBDA_NODES + dj) * t.width + l) as f64,
+                )
+            };
+            let row = |di: usize| {
+                let v0 = at(di, 0);
+                v0 + (at(di, 1) - v0) * fj
+            };
+            let r0 = row(0);
+            r0 + (row(1) - r0) * fi
+        });
+        Some(values)
+    }
+
     /// Whether the horizon twin can take a share of TWIN_NEGLIGIBLE or
     /// more anywhere in the band: its share is TWIN_SHARE e^-(k sigma)^2,
     /// largest at the longest wavelength; with a sigma texture sigma may be
@@ -440,7 +568,8 @@ impl Gaussian {
         let a = k * self.sigma_times(b, 2.0) * wi[2];
         let g0 = a * a;
         let series = g0.lt(SERIES_MAX_G);
-        let (lobes, m_mean) = self.slope_lobes(b, wi, k, g0, series);
+        let fits = self.fit_values(b, wi[2], lambda);
+        let (lobes, m_mean, _) = self.slope_lobes(b, wi, k, g0, series, fits.map(|f| f[0]));
         let terms = TermMixture::new(series, g0, m_mean);
         // The twin (isotropic surfaces, the series regime) where the mirror
         // point is within 2 plane sds of the rim (as `build_component`).
@@ -455,7 +584,10 @@ impl Gaussian {
             let near = series & to_rim.lt(sd * 2.0);
             let kf = k * self.sigma_times(b, 1.0);
             let smooth = near.select((-(kf * kf)).exp(), 0.0);
-            let twin = TwinLobe::new(wi, sd, (-g0).exp());
+            let twin = match fits {
+                Some([_, mean, alpha_sd]) => TwinLobe::fitted(wi, sd, mean, alpha_sd),
+                None => TwinLobe::new(wi, sd, (-g0).exp()),
+            };
             (
                 Some((twin, smooth * TWIN_SHARE)),
                 (1.0 - smooth) * MIRROR_LOBE,
@@ -498,7 +630,8 @@ impl Gaussian {
         k: Value<'a>,
         g0: Value<'a>,
         series: Mask<'a>,
-    ) -> ([SlopeLobe<'a>; 2], Value<'a>) {
+        mode: Option<Value<'a>>,
+    ) -> ([SlopeLobe<'a>; 2], Value<'a>, Value<'a>) {
         let s = &self.surface;
         let (tx2, ty2) = (s.corr_x_um * s.corr_x_um, s.corr_y_um * s.corr_y_um);
         // The correlation lengths' terms as built constants
@@ -541,11 +674,16 @@ impl Gaussian {
         // (the grazing limit), three steps converge (checked on a model of
         // the law from cos_i 0.001 to 0.9; from a = 0 the most grazing need
         // 30).
-        let mut a = ((p / (kappa_a * 8.0)).sqrt().sqrt() - c).max(0.0);
-        for _ in 0..3 {
-            let (d1, d2, ..) = derivatives(a);
-            a = (a - d1 / d2.min(-1e-6)).clamp(0.0, 10.0);
-        }
+        // (An isotropic surface's mode is a function of cos_i and k: the
+        // fit table's, where it has one.)
+        let a = mode.unwrap_or_else(|| {
+            let mut a = ((p / (kappa_a * 8.0)).sqrt().sqrt() - c).max(0.0);
+            for _ in 0..3 {
+                let (d1, d2, ..) = derivatives(a);
+                a = (a - d1 / d2.min(-1e-6)).clamp(0.0, 10.0);
+            }
+            a
+        });
         let (_, d2, n, d, lw1) = derivatives(a);
         let w = n / d * 2.0;
         let w2 = w * w;
@@ -593,6 +731,7 @@ impl Gaussian {
         (
             [SlopeLobe::new(centre, fitted), SlopeLobe::new(zero, mirror)],
             m_mean,
+            a,
         )
     }
 
