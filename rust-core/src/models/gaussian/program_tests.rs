@@ -619,3 +619,34 @@ fn at_built_rgb_eval_equals_the_plain_one() {
         stam_brdf_free(b);
     }
 }
+
+/// Which ops a program holds.
+fn holds(p: &Program, op: crate::program::Op) -> bool {
+    p.code.iter().any(|i| i.op == op)
+}
+
+/// The spectral sampling programs of an isotropic surface read their fits
+/// from `FitTable` (no Newton step: the pdf then takes no sine or cosine),
+/// and a rough surface leaves out the horizon twin (no atan2 in its pdf);
+/// a sigma texture keeps the steps and the twin (sigma varies per point).
+/// Each of these made the spectral Gaussians' renders 10-20% faster
+/// (docs/jit.md, "Render time"); this keeps them from being lost quietly.
+#[test]
+fn spectral_strategies_read_their_fits_from_the_table() {
+    use crate::program::Op;
+    let pdf = |json: &str| exported(&brdf(json), ProgramKind::PdfSpectral).unwrap();
+    let smooth = pdf(r#"{"surface": "gaussian", "sigma_um": 0.05, "corr_um": 2.0}"#);
+    assert!(!holds(&smooth, Op::Sin) && !holds(&smooth, Op::Cos));
+    assert!(
+        holds(&smooth, Op::Atan2),
+        "the smooth surface keeps its twin"
+    );
+    let rough = pdf(r#"{"surface": "gaussian", "sigma_um": 0.5, "corr_um": 4.0}"#);
+    assert!(
+        !holds(&rough, Op::Atan2),
+        "the rough surface's twin is negligible"
+    );
+    let textured =
+        pdf(r#"{"surface": "gaussian", "sigma_um": 0.5, "corr_um": 4.0, "sigma_um_max": 0.6}"#);
+    assert!(holds(&textured, Op::Sin) && holds(&textured, Op::Atan2));
+}

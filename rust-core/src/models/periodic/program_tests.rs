@@ -956,3 +956,23 @@ fn a_differentiated_period_plans_for_its_interval() {
         assert!(nonzero > 100, "{kind:?}: {nonzero} non-zero values");
     }
 }
+
+/// The compact disc's spectral sampling programs read the orders' weights
+/// from `spectral_order_table` (so their pdf takes no sine: the rect
+/// profile's powers are the only ones), which took its render in
+/// llvm_ad_spectral from 2.7x to 1.8x of roughconductor (a size cap had
+/// once left its 27 orders out unnoticed); with a differentiated period
+/// the weights are computed, following it.
+#[test]
+fn spectral_sampling_reads_the_order_table() {
+    use crate::program::Op;
+    let pdf = |json: &str| {
+        let p = exported(&Brdf::from_json(json).unwrap(), ProgramKind::PdfSpectral).unwrap();
+        p.code.iter().any(|i| i.op == Op::Sin)
+    };
+    assert!(
+        !pdf(r#"{"surface": "cd"}"#),
+        "the disc computes its weights"
+    );
+    assert!(pdf(r#"{"surface": "cd", "gradients": ["period_um"]}"#));
+}
