@@ -532,8 +532,9 @@ impl Gaussian {
     /// more anywhere in the band: its share is TWIN_SHARE e^-(k sigma)^2,
     /// largest at the longest wavelength; with a sigma texture sigma may be
     /// anything, so the twin stays. Where it cannot, the programs leave it
-    /// out, sample and pdf alike (it was a third of a spectral rough
-    /// surface's render time, docs/plugin_speed.md).
+    /// out, sample and pdf alike (for the rough benchmark surface in
+    /// llvm_ad_spectral it cost 0.35x of roughconductor's render time,
+    /// docs/jit.md "Render time").
     fn twin_matters(&self) -> bool {
         let kf = wavenumber_per_um(LAMBDA_MAX_NM) * self.surface.sigma_um;
         self.sigma_um_max.is_some() || TWIN_SHARE * (-(kf * kf)).exp() >= TWIN_NEGLIGIBLE
