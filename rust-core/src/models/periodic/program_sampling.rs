@@ -377,7 +377,7 @@ impl Periodic {
         let row_len = cells * SPECTRAL_NODES * n_out;
         let mut table = vec![0.0f32; cells * row_len];
         // Rows of cells on every core (the compact disc's 39,168 runs added
-        // 0.15 s to its first spectral program on 2 cores).
+        // 0.08-0.15 s to its first spectral program's export on 2 cores).
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let rows_per_thread = cells.div_ceil(threads);
         std::thread::scope(|scope| {
