@@ -41,7 +41,7 @@ use crate::models::{SampleProgram, Shading};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::Vec3;
 use crate::program::lookup::select_chain;
-use crate::program::{Builder, ParamId, Table, Value};
+use crate::program::{Builder, ParamId, Program, Table, Value};
 use crate::sampling::{band_density, DEFENSIVE_FRACTION, RGB_BAND_NM};
 use std::borrow::Cow;
 use std::f64::consts::{PI, SQRT_2};
@@ -276,10 +276,7 @@ impl Periodic {
                 // so the density stays exact for them.
                 let (table, n_max) = self.rgb_order_table(self.surface.plan_period_um(b))?;
                 let entries = 2 * n_max + 1;
-                let cells = ORDER_CELLS_PER_AXIS as f64;
-                let index =
-                    |x: Value<'a>| ((x + 1.0) * (0.5 * cells)).floor().clamp(0.0, cells - 1.0);
-                let base = (index(wi[1]) * cells + index(wi[0])) * (2 * entries) as f64;
+                let base = wi_cell(wi, ORDER_CELLS_PER_AXIS) * (2 * entries) as f64;
                 let t = b.table(table.to_vec());
                 for (j, n) in rgb_order_list(n_max).into_iter().enumerate() {
                     let w = b.gather(t, base + j as f64);
@@ -314,13 +311,11 @@ impl Periodic {
         }
         let (table, n_max) = self.spectral_order_table()?;
         let entries = 2 * n_max + 1;
-        let cells = SPECTRAL_CELLS_PER_AXIS as f64;
-        let index = |x: Value<'a>| ((x + 1.0) * (0.5 * cells)).floor().clamp(0.0, cells - 1.0);
         let (lo, hi) = SPECTRAL_TABLE_BAND_NM;
         let last = (SPECTRAL_NODES - 1) as f64;
         let x = ((lambda - lo) * (last / (hi - lo))).clamp(0.0, last);
         let j = x.floor().min(last - 1.0);
-        let cell = index(wi[1]) * cells + index(wi[0]);
+        let cell = wi_cell(wi, SPECTRAL_CELLS_PER_AXIS);
         Some(SpectralOrderLookup {
             table: b.table(table.to_vec()),
             base: (cell * SPECTRAL_NODES as f64 + j) * entries as f64 + n_max as f64,
@@ -368,42 +363,11 @@ impl Periodic {
         let outputs: Vec<Value> = (-n_max_i..=n_max_i)
             .map(|n| self.order_weight_program(&b, &powers, wi, b.c(n as f64), lambda))
             .collect();
-        let program = b.finish(&outputs);
-        let cells = SPECTRAL_CELLS_PER_AXIS;
-        let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
         let (lo, hi) = SPECTRAL_TABLE_BAND_NM;
-        let node = |j: usize| lo + (hi - lo) * j as f64 / (SPECTRAL_NODES - 1) as f64;
-        let n_out = outputs.len();
-        let row_len = cells * SPECTRAL_NODES * n_out;
-        let mut table = vec![0.0f32; cells * row_len];
-        // Rows of cells on every core (the compact disc's 39,168 runs added
-        // 0.08-0.15 s to its first spectral program's export on 2 cores).
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let rows_per_thread = cells.div_ceil(threads);
-        std::thread::scope(|scope| {
-            for (chunk, rows) in table.chunks_mut(rows_per_thread * row_len).enumerate() {
-                let program = &program;
-                scope.spawn(move || {
-                    let mut regs = Vec::new();
-                    let mut out = vec![0.0f64; n_out];
-                    let mut at = 0;
-                    for row in 0..rows.len() / row_len {
-                        let iy = chunk * rows_per_thread + row;
-                        for ix in 0..cells {
-                            let wi = super::sampling::within_rim(centre(ix), centre(iy));
-                            for j in 0..SPECTRAL_NODES {
-                                program.run_into(&[wi.x, wi.y, wi.z, node(j)], &mut regs, &mut out);
-                                for &x in &out {
-                                    rows[at] = if x.is_finite() { x as f32 } else { 0.0 };
-                                    at += 1;
-                                }
-                            }
-                        }
-                    }
-                });
-            }
-        });
-        table
+        let nodes: Vec<Vec<f64>> = (0..SPECTRAL_NODES)
+            .map(|j| vec![lo + (hi - lo) * j as f64 / (SPECTRAL_NODES - 1) as f64])
+            .collect();
+        tabulate_over_wi_cells(&b.finish(&outputs), SPECTRAL_CELLS_PER_AXIS, &nodes)
     }
 
     /// The RGB orders' exact weights and tilts at wi (the entries of
@@ -506,23 +470,7 @@ impl Periodic {
         let powers = PowerProgram::new(&b, &self.surface);
         let (weights, tilts) = self.rgb_orders_exact(&b, &powers, wi, n_max);
         let outputs: Vec<Value> = weights.into_iter().chain(tilts).collect();
-        let program = b.finish(&outputs);
-        let cells = ORDER_CELLS_PER_AXIS;
-        let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
-        let mut table = Vec::with_capacity(cells * cells * outputs.len());
-        let mut regs = Vec::new();
-        let mut out = vec![0.0f64; outputs.len()];
-        for iy in 0..cells {
-            for ix in 0..cells {
-                let wi = super::sampling::within_rim(centre(ix), centre(iy));
-                program.run_into(&[wi.x, wi.y, wi.z], &mut regs, &mut out);
-                table.extend(
-                    out.iter()
-                        .map(|&x| if x.is_finite() { x as f32 } else { 0.0 }),
-                );
-            }
-        }
-        table
+        tabulate_over_wi_cells(&b.finish(&outputs), ORDER_CELLS_PER_AXIS, &[vec![]])
     }
 
     pub(super) fn sampling_program<'a>(
@@ -689,6 +637,56 @@ impl Periodic {
         let density = p_def * defensive + (1.0 - p_def) * lobe * wo[2];
         Some(wo[2].gt(MIN_COS).select(density, 0.0))
     }
+}
+
+/// The cell of a grid of `cells` x `cells` over (wi.x, wi.y) in [-1, 1]^2
+/// that holds wi, as an index (rows along y): where the order tables are
+/// read.
+fn wi_cell<'a>(wi: Vec3<'a>, cells: usize) -> Value<'a> {
+    let n = cells as f64;
+    let index = |x: Value<'a>| ((x + 1.0) * (0.5 * n)).floor().clamp(0.0, n - 1.0);
+    index(wi[1]) * n + index(wi[0])
+}
+
+/// The outputs of `program` (inputs wi, then one of `runs`' extra inputs)
+/// at the centre of each cell of `wi_cell`'s grid (moved onto the rim
+/// where outside it), for each entry of `runs` in turn, cells in index
+/// order, as f32 (not finite: 0): how the order tables are made, rows of
+/// cells on every core (the compact disc's spectral table, 39,168 runs,
+/// added 0.08-0.15 s to its first spectral program's export on 2 cores).
+fn tabulate_over_wi_cells(program: &Program, cells: usize, runs: &[Vec<f64>]) -> Vec<f32> {
+    let n_out = program.outputs.len();
+    let row_len = cells * runs.len() * n_out;
+    let mut table = vec![0.0f32; cells * row_len];
+    let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let rows_per_thread = cells.div_ceil(threads);
+    std::thread::scope(|scope| {
+        for (chunk, rows) in table.chunks_mut(rows_per_thread * row_len).enumerate() {
+            scope.spawn(move || {
+                let (mut regs, mut out) = (Vec::new(), vec![0.0f64; n_out]);
+                let mut values = rows.iter_mut();
+                for row in 0..rows_per_thread.min(cells - chunk * rows_per_thread) {
+                    let iy = chunk * rows_per_thread + row;
+                    for ix in 0..cells {
+                        let wi = super::sampling::within_rim(centre(ix), centre(iy));
+                        for extra in runs {
+                            let inputs: Vec<f64> = [wi.x, wi.y, wi.z]
+                                .into_iter()
+                                .chain(extra.iter().copied())
+                                .collect();
+                            program.run_into(&inputs, &mut regs, &mut out);
+                            // (out first: zip takes from its first iterator first)
+                            for (&x, v) in out.iter().zip(values.by_ref()) {
+                                *v = if x.is_finite() { x as f32 } else { 0.0 };
+                            }
+                        }
+                    }
+                }
+            });
+        }
+    });
+    table
 }
 
 /// `warps::uniform_direction` as program operations.
