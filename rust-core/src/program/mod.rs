@@ -20,6 +20,7 @@ mod builder;
 mod encode;
 mod interpret;
 pub mod lookup;
+pub mod special;
 #[cfg(test)]
 mod tests;
 

@@ -17,6 +17,7 @@ use super::{
 };
 use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::program::{PairProgram, Vec3};
+use crate::program::special::sin_squared;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
 use std::f64::consts::PI;
 
@@ -105,10 +106,9 @@ impl PowerProgram {
     /// in-band wavelength).
     pub(super) fn at<'a>(&self, b: &'a Builder, beta: Value<'a>) -> PowerAt<'a> {
         match self {
-            PowerProgram::Rect { height_um, .. } => {
-                let s = (beta * b.built(0.5 * height_um)).sin();
-                PowerAt::Rect { s2: s * s }
-            }
+            PowerProgram::Rect { height_um, .. } => PowerAt::Rect {
+                s2: sin_squared(beta * b.built(0.5 * height_um)),
+            },
             PowerProgram::Table {
                 step,
                 n_beta,
@@ -398,8 +398,8 @@ impl<'a> RectOrder<'a> {
         // unselected branch would otherwise give NaN derivatives)
         let order0 = n.eq(0.0);
         let x = order0.select(1.0, n.abs() * fill * PI);
-        let sinc = x.sin() / x;
-        let c = order0.select(fill * (1.0 - fill), fill * fill * (sinc * sinc)) * 4.0;
+        let sinc2 = sin_squared(x) / (x * x);
+        let c = order0.select(fill * (1.0 - fill), fill * fill * sinc2) * 4.0;
         RectOrder { order0, c }
     }
 
@@ -412,8 +412,7 @@ impl<'a> RectOrder<'a> {
 
 /// sin^2(beta h / 2)
 pub(super) fn rect_s2<'a>(beta: Value<'a>, height: Value<'a>) -> Value<'a> {
-    let s = (beta * height * 0.5).sin();
-    s * s
+    sin_squared(beta * height * 0.5)
 }
 
 impl PeriodicSurface {
