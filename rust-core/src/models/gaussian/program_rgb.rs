@@ -9,7 +9,7 @@ use super::GaussianSurface;
 use crate::models::{RgbRule, Shading};
 use crate::optics::fresnel::Fresnel;
 use crate::optics::program::PairProgram;
-use crate::program::lookup::bspline_weights;
+use crate::program::lookup::{bspline_weights, low_rank};
 use crate::program::{Builder, Value};
 use std::f64::consts::PI;
 
@@ -332,7 +332,8 @@ pub(crate) fn weighted_sum<'a>(
     }
     let (bins, rows) = rule.export_weights(fresnel);
     let n = rule.len();
-    let Some((phi, a)) = low_rank(&rows, bins + 1, 3 * n, 1e-6) else {
+    let flat: Vec<f64> = rows.iter().flatten().copied().collect();
+    let Some((phi, a)) = low_rank(&flat, bins + 1, 3 * n, 1e-6) else {
         return rule.integrate_program(b, fresnel, cos, values);
     };
     let rank = a.len();
@@ -359,96 +360,4 @@ pub(crate) fn weighted_sum<'a>(
         });
         per_rank.reduce(|x, y| x + y).unwrap_or_else(|| b.c(0.0))
     })
-}
-
-/// The rank-P form of a `rows` x `cols` matrix given as rows of triples
-/// (cols = 3 per triple): phi (rows x P, row-major) and A (P rows of cols)
-/// with |M - phi A| <= `tolerance` max |M| everywhere, P the smallest such
-/// (from the eigenvectors of M^T M by cyclic Jacobi); None when no P <=
-/// cols / 2 reaches it.
-fn low_rank(
-    m: &[[f64; 3]],
-    rows: usize,
-    cols: usize,
-    tolerance: f64,
-) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
-    let flat: Vec<f64> = m.iter().flatten().copied().collect();
-    if flat.len() != rows * cols || cols == 0 {
-        return None;
-    }
-    let at = |r: usize, c: usize| flat[r * cols + c];
-    let largest = flat.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    // Gram matrix and its eigenvectors.
-    let mut g = vec![vec![0.0; cols]; cols];
-    for row in flat.chunks_exact(cols) {
-        for (gi, &ri) in g.iter_mut().zip(row) {
-            for (gij, &rj) in gi.iter_mut().zip(row) {
-                *gij += ri * rj;
-            }
-        }
-    }
-    let mut v: Vec<Vec<f64>> = (0..cols)
-        .map(|i| (0..cols).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
-        .collect();
-    for _ in 0..60 {
-        let mut off = 0.0;
-        for p in 0..cols {
-            for q in p + 1..cols {
-                off += g[p][q] * g[p][q];
-                if g[p][q].abs() < 1e-300 {
-                    continue;
-                }
-                let theta = (g[q][q] - g[p][p]) / (2.0 * g[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let (c, s) = (1.0 / (t * t + 1.0).sqrt(), t / (t * t + 1.0).sqrt());
-                for gk in g.iter_mut() {
-                    let (gkp, gkq) = (gk[p], gk[q]);
-                    gk[p] = c * gkp - s * gkq;
-                    gk[q] = s * gkp + c * gkq;
-                }
-                let (head, tail) = g.split_at_mut(q);
-                for (gpk, gqk) in head[p].iter_mut().zip(tail[0].iter_mut()) {
-                    let (x, y) = (*gpk, *gqk);
-                    *gpk = c * x - s * y;
-                    *gqk = s * x + c * y;
-                }
-                for row in v.iter_mut() {
-                    let (vp, vq) = (row[p], row[q]);
-                    row[p] = c * vp - s * vq;
-                    row[q] = s * vp + c * vq;
-                }
-            }
-        }
-        if off < 1e-30 * largest.powi(4) {
-            break;
-        }
-    }
-    let mut order: Vec<usize> = (0..cols).collect();
-    order.sort_by(|&x, &y| g[y][y].total_cmp(&g[x][x]));
-    for rank in 1..=cols / 2 {
-        let basis: Vec<Vec<f64>> = order[..rank]
-            .iter()
-            .map(|&e| (0..cols).map(|i| v[i][e]).collect())
-            .collect();
-        let phi: Vec<f64> = (0..rows)
-            .flat_map(|r| {
-                basis
-                    .iter()
-                    .map(|u| (0..cols).map(|i| at(r, i) * u[i]).sum::<f64>())
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        let worst = (0..rows)
-            .flat_map(|r| (0..cols).map(move |c| (r, c)))
-            .map(|(r, c)| {
-                let approx: f64 = (0..rank).map(|p| phi[r * rank + p] * basis[p][c]).sum();
-                (approx - at(r, c)).abs()
-            })
-            .fold(0.0, f64::max);
-        if worst <= tolerance * largest {
-            return Some((phi, basis));
-        }
-    }
-    None
 }

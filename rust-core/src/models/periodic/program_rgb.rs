@@ -38,6 +38,8 @@ use super::{RGB_SMOOTH_NODES, RGB_TAIL_EXPONENT};
 use crate::models::{FactorMaker, Shading};
 use crate::optics::fresnel::Fresnel;
 use crate::optics::program::PairProgram;
+use crate::program::lookup::low_rank;
+use crate::program::special::sin_squared;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
 use crate::spectrum;
 use std::f64::consts::{PI, SQRT_2};
@@ -343,14 +345,31 @@ impl Periodic {
 enum Reflectance<'a> {
     Flat(Value<'a>),
     Metal {
-        /// Over (sqrt(cos) row, wavenumber column), and over (row, node of
-        /// the 32-node rule).
+        /// Over (sqrt(cos) row, wavenumber column).
         grid: Table,
-        nodes: Table,
+        nodes: NodeRows,
         row: Value<'a>,
         frac: Value<'a>,
     },
 }
+
+/// A metal's F^2 over (sqrt(cos) row, node of the 32-node rule).
+enum NodeRows {
+    /// Row by row (2 gathers per node).
+    Full(Table),
+    /// Its low-rank form (`lookup::low_rank`): F^2(row, j) = sum_p
+    /// phi_p(row) basis_pj to NODE_RANK_TOLERANCE of the largest, P ~ 6 for
+    /// the measured metals (the rows are nearly combinations of a few
+    /// cosine profiles): 2 P gathers of phi, then P multiply-adds per node.
+    LowRank { phi: Table, basis: Vec<Vec<f64>> },
+}
+
+/// The node rows' low-rank tolerance (of the largest F^2; reading the rows
+/// linearly in sqrt(cos), 64 steps, already errs by up to 2e-4 for
+/// aluminium and gold, 5e-4 for chromium), and the most terms worth their
+/// multiply-adds.
+const NODE_RANK_TOLERANCE: f64 = 1e-5;
+const NODE_RANK_MAX: usize = 12;
 
 impl<'a> Reflectance<'a> {
     fn new(b: &'a Builder, fresnel: &Fresnel, cos: Value<'a>) -> Reflectance<'a> {
@@ -368,19 +387,23 @@ impl<'a> Reflectance<'a> {
             })
             .collect();
         let broad = PeriodicSurface::broad_rule_wavelengths();
-        let nodes = (0..rows)
-            .flat_map(|r| {
-                broad
-                    .iter()
-                    .map(move |&l| fresnel.reflectance(x_of(r), l) as f32)
-            })
+        let nodes: Vec<f64> = (0..rows)
+            .flat_map(|r| broad.iter().map(move |&l| fresnel.reflectance(x_of(r), l)))
             .collect();
+        let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect();
+        let nodes = match low_rank(&nodes, rows, broad.len(), NODE_RANK_TOLERANCE) {
+            Some((phi, basis)) if basis.len() <= NODE_RANK_MAX => NodeRows::LowRank {
+                phi: b.table(f32s(&phi)),
+                basis,
+            },
+            _ => NodeRows::Full(b.table(f32s(&nodes))),
+        };
         let cos = cos.finite().select(cos, 0.0);
         let x = cos.clamp(0.0, 1.0).sqrt() * FRESNEL_COS_STEPS as f64;
         let row = x.floor().min((FRESNEL_COS_STEPS - 1) as f64);
         Reflectance::Metal {
             grid: b.table(grid),
-            nodes: b.table(nodes),
+            nodes,
             frac: x - row,
             row,
         }
@@ -407,17 +430,35 @@ impl<'a> Reflectance<'a> {
         }
     }
 
-    /// F^2 at node j of the broad rule.
-    fn at_node(&self, b: &'a Builder, j: usize) -> Value<'a> {
-        match self {
-            Reflectance::Flat(_) => b.c(1.0),
+    /// F^2 at the broad rule's nodes (1 for a flat term), for the region
+    /// that integrates the broad peaks.
+    fn at_nodes(&self, b: &'a Builder) -> Vec<Value<'a>> {
+        let (nodes, row, frac) = match self {
+            Reflectance::Flat(_) => return vec![b.c(1.0); RGB_SMOOTH_NODES],
             Reflectance::Metal {
                 nodes, row, frac, ..
-            } => {
-                let at = *row * RGB_SMOOTH_NODES as f64 + j as f64;
-                let lo = b.gather(*nodes, at);
-                let hi = b.gather(*nodes, at + RGB_SMOOTH_NODES as f64);
-                lo + (hi - lo) * *frac
+            } => (nodes, *row, *frac),
+        };
+        let lerp = |table: Table, width: usize, i: usize| {
+            let at = row * width as f64 + i as f64;
+            let lo = b.gather(table, at);
+            let hi = b.gather(table, at + width as f64);
+            lo + (hi - lo) * frac
+        };
+        match nodes {
+            NodeRows::Full(table) => (0..RGB_SMOOTH_NODES)
+                .map(|j| lerp(*table, RGB_SMOOTH_NODES, j))
+                .collect(),
+            NodeRows::LowRank { phi, basis } => {
+                let phi: Vec<Value<'a>> = (0..basis.len())
+                    .map(|p| lerp(*phi, basis.len(), p))
+                    .collect();
+                (0..RGB_SMOOTH_NODES)
+                    .map(|j| {
+                        let terms = phi.iter().zip(basis).map(|(&f, a)| f * a[j]);
+                        terms.reduce(|x, y| x + y).expect("a rank of at least 1")
+                    })
+                    .collect()
             }
         }
     }
@@ -826,10 +867,10 @@ impl Periodic {
                 (Some(f), Some(_)) => f.at(1000.0 / nu),
                 (Some(f), None) => refl.at(b, nu) * f.at(1000.0 / nu),
             };
-            let refl_at_node = |j: usize| match (factor, refl.flat()) {
-                (None, _) => refl.at_node(b, j),
+            let refl_at_node = |f2: &[Value<'a>], j: usize| match (factor, refl.flat()) {
+                (None, _) => f2[j],
                 (Some(f), Some(_)) => f.at_nm(rule.lambda_nm[j]),
-                (Some(f), None) => refl.at_node(b, j) * f.at_nm(rule.lambda_nm[j]),
+                (Some(f), None) => f2[j] * f.at_nm(rule.lambda_nm[j]),
             };
 
             // Narrow peaks, each order where some lane takes it.
@@ -879,36 +920,66 @@ impl Periodic {
                 }
             }
 
-            // Broad peaks: the 32-node rule over orders -broad..=broad.
+            // Broad peaks: the 32-node rule over orders -broad..=broad. At
+            // node nu, order n's exponent is (a_u nu - b_n)^2 + a_v^2 nu^2
+            // (a_u = 2 pi l u, a_v = 2 pi l v, b_n = 2 pi l n / Lambda), for
+            // order 0 (a_u^2 + a_v^2) nu^2; the rect profile's s^2 is
+            // sin^2((pi h w) nu); c_const and nu^2 go with the weights.
             let broad_sum = b.region(!narrow, || {
+                let f2 = refl.at_nodes(b);
+                let (a_u, a_v) = (u * two_pi_l, v * two_pi_l);
+                let a_v2 = a_v * a_v;
+                let a2 = a_u.fma(a_u, a_v2);
+                let minus_b: Vec<Value<'a>> = broad_orders
+                    .iter()
+                    .map(|o| inv_lam * (-o.0) * two_pi_l)
+                    .collect();
+                let phase = match profile {
+                    ProfileProgram::Rect { height, .. } => Some(w * height * PI),
+                    ProfileProgram::Scaled(_) => None,
+                };
+                // One order: its mask applies once, to the sum.
+                let single = broad_orders.len() == 1;
                 let mut broad_sum = [b.c(0.0); 3];
                 for (j, (&nu, weights)) in rule.nu_per_um.iter().zip(&rule.weights).enumerate() {
-                    let beta = w * (2.0 * PI * nu);
-                    let (at, s2): (Option<PowerAt>, _) = match profile {
-                        ProfileProgram::Rect { height, .. } => (None, Some(rect_s2(beta, height))),
-                        ProfileProgram::Scaled(_) => {
+                    let nu2 = nu * nu;
+                    let (at, s2): (Option<PowerAt>, _) = match phase {
+                        Some(phase) => (None, Some(sin_squared(phase * nu))),
+                        None => {
+                            let beta = w * (2.0 * PI * nu);
                             (Some(powers.at(b, profile.scaled_beta(beta))), None)
                         }
                     };
-                    let ev = (v * two_pi_l_times(nu)).sq();
                     let mut sum = b.c(0.0);
-                    for &(n, take, rect) in &broad_orders {
-                        let d = (u * nu - inv_lam * n) * two_pi_l;
-                        let e = d.fma(d, ev);
+                    for (&(n, take, rect), &minus_b) in broad_orders.iter().zip(&minus_b) {
+                        let e = if n == 0.0 {
+                            a2 * nu2
+                        } else {
+                            let d = a_u.fma(nu, minus_b);
+                            d.fma(d, a_v2 * nu2)
+                        };
                         let power = match (rect, s2, &at) {
                             (Some(r), Some(s2), _) => r.power(s2),
                             (_, _, Some(at)) => powers.power_const(b, at, n as i64),
                             _ => unreachable!("the powers are prepared for the profile"),
                         };
                         let term = power * (-e).exp();
-                        sum = sum + (take & e.lt(700.0)).select(term, 0.0);
+                        sum = sum + if single { term } else { take.select(term, 0.0) };
                     }
-                    let val = refl_at_node(j) * (nu * nu) * c_const * sum;
+                    let val = refl_at_node(&f2, j) * sum;
                     for ch in 0..3 {
-                        broad_sum[ch] = broad_sum[ch] + val * weights[ch];
+                        broad_sum[ch] = val.fma(weights[ch] * nu2, broad_sum[ch]);
                     }
                 }
-                broad_sum
+                let take = broad_orders[0].1;
+                broad_sum.map(|c| {
+                    let c = c * c_const;
+                    if single {
+                        take.select(c, 0.0)
+                    } else {
+                        c
+                    }
+                })
             });
             std::array::from_fn(|ch| narrow.select(narrow_sum[ch], broad_sum[ch]) * flat)
         });
