@@ -694,20 +694,10 @@ impl<'a> TableProgram<'a> {
                 })
                 .collect()
         };
-        // Per segment q: the slope d_q and the intercept product_q - q d_q.
-        let slope: Vec<Value<'a>> = product.windows(2).map(|p| p[1] - p[0]).collect();
-        let intercept = product
-            .iter()
-            .zip(&slope)
-            .enumerate()
-            .map(|(q, (&p, &d))| d.fma(-(q as f64), p))
-            .collect();
         PairFactorProgram {
             lambda_lo: t.lambda_lo,
             lambda_step: t.lambda_step,
             product,
-            slope,
-            intercept,
         }
     }
 }
@@ -765,15 +755,11 @@ pub struct PairFactorProgram<'a> {
     lambda_lo: f64,
     lambda_step: f64,
     product: Vec<Value<'a>>,
-    /// Per segment q (nodes q, q + 1): the slope per node step and
-    /// product_q - q slope_q, so that the value at x (in node steps) is
-    /// intercept_q + slope_q x.
-    slope: Vec<Value<'a>>,
-    intercept: Vec<Value<'a>>,
 }
 
 impl<'a> FactorProgram<'a> for PairFactorProgram<'a> {
-    /// The segment by a chain of selects (3 operations per node).
+    /// The segment's two nodes by a chain of selects (3 operations per
+    /// node), then linear between them.
     fn at(&self, lambda_nm: Value<'a>) -> Value<'a> {
         let k = self.product.len();
         if k == 1 {
@@ -781,13 +767,13 @@ impl<'a> FactorProgram<'a> for PairFactorProgram<'a> {
         }
         let x =
             ((lambda_nm - self.lambda_lo) * (1.0 / self.lambda_step)).clamp(0.0, (k - 1) as f64);
-        let (mut a, mut d) = (self.intercept[0], self.slope[0]);
+        let (mut lo, mut hi) = (self.product[0], self.product[1]);
         for q in 1..k - 1 {
             let past = x.ge(q as f64);
-            a = past.select(self.intercept[q], a);
-            d = past.select(self.slope[q], d);
+            lo = past.select(self.product[q], lo);
+            hi = past.select(self.product[q + 1], hi);
         }
-        d.fma(x, a)
+        (hi - lo).fma(x - x.floor().min((k - 2) as f64), lo)
     }
 
     fn at_nm(&self, lambda_nm: f64) -> Value<'a> {
@@ -801,7 +787,7 @@ impl<'a> FactorProgram<'a> for PairFactorProgram<'a> {
         if f == 0.0 {
             self.product[q]
         } else {
-            self.slope[q].fma(f, self.product[q])
+            (self.product[q + 1] - self.product[q]).fma(f, self.product[q])
         }
     }
 }

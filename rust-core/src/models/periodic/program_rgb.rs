@@ -628,8 +628,9 @@ impl<'a> SmoothedWeight<'a> {
         }
     }
 
-    /// W~, dW~/dmu and dW~/dt per channel at mu.
-    fn at(&self, b: &'a Builder, mu: Value<'a>) -> [[Value<'a>; 3]; 3] {
+    /// W~, dW~/dmu and dW~/dt per channel at mu, each times e^ln_scale
+    /// (which joins ln E in its one exponential).
+    fn at(&self, b: &'a Builder, mu: Value<'a>, ln_scale: Value<'a>) -> [[Value<'a>; 3]; 3] {
         let (q, qm, qt): ([Value<'a>; POINT], [Value<'a>; POINT], [Value<'a>; POINT]) =
             if self.t_cubic {
                 // A Hermite in t of each level's values and t-slopes.
@@ -661,7 +662,7 @@ impl<'a> SmoothedWeight<'a> {
                     std::array::from_fn(|c| (v1[c].0 - v0[c].0) * self.inv_dt),
                 )
             };
-        let e = q[0].exp();
+        let e = (q[0] + ln_scale).exp();
         let w = std::array::from_fn(|c| e * q[c + 1]);
         let wm = std::array::from_fn(|c| e * qm[0].fma(q[c + 1], qm[c + 1]));
         let wt = std::array::from_fn(|c| e * qt[0].fma(q[c + 1], qt[c + 1]));
@@ -908,8 +909,10 @@ impl Periodic {
                     let a0 = s0 - d1 * e + d2 * e * e;
                     let a1 = d1 - d2 * e * 2.0;
                     let a2 = d2;
-                    let [wv, wm, wt] = table.at(b, mu);
-                    let scale = c_const * (-pk.a_n).exp() * norm;
+                    // The peak's height across the grooves, e^-a_n, with
+                    // the weight's E.
+                    let [wv, wm, wt] = table.at(b, mu, -pk.a_n);
+                    let scale = c_const * norm;
                     let k0 = a0 + a2 * t;
                     let k1 = a1 * t;
                     let k2 = a2 * t * t * 2.0;
