@@ -8,7 +8,9 @@
 //! wi.y) (`rgb_order_table`, as the native grating table's cells). Both
 //! tables are made once per material by running the weights' program on
 //! the CPU. The weights only steer the sampling; the pdf is exact for
-//! whatever weights.
+//! whatever weights. A pdf computes only the terms that can be non-zero
+//! in f32 (each order's Gaussian across the grooves underflows beyond
+//! |v| ~ 14 sigma): towards a light, most lanes skip every order.
 //!
 //! One wavelength: order n (centre u_n = n lambda / Lam inside the disk)
 //! with probability ~ |c_n(k w_n)|^2 min(G / w^2, 50) at its centre
@@ -109,6 +111,32 @@ fn zero_order_nodes() -> Vec<(f64, f64)> {
     let total: f64 = nodes.iter().map(|n| n.1).sum();
     nodes.into_iter().map(|(l, m)| (l, m / total)).collect()
 }
+
+/// wi's cell of the RGB order table (`rgb_order_table`): per cell the
+/// weights of `rgb_order_list`, their tilts, then the total weight.
+struct RgbOrderCell<'a> {
+    table: Table,
+    base: Value<'a>,
+    orders: Vec<i64>,
+}
+
+impl<'a> RgbOrderCell<'a> {
+    fn weight(&self, b: &'a Builder, j: usize) -> Value<'a> {
+        b.gather(self.table, self.base + j as f64)
+    }
+
+    fn tilt(&self, b: &'a Builder, j: usize) -> Value<'a> {
+        b.gather(self.table, self.base + (self.orders.len() + j) as f64)
+    }
+
+    fn total(&self, b: &'a Builder) -> Value<'a> {
+        b.gather(self.table, self.base + (2 * self.orders.len()) as f64)
+    }
+}
+
+/// exp(-x) in f32 is 0 beyond x = 104 (the smallest subnormal is
+/// e^-103.3): a sum of such terms can skip its lanes there exactly.
+const F32_EXP_UNDERFLOW: f64 = 104.0;
 
 /// What the sampling programs of one material and mode share.
 struct Orders<'a> {
@@ -274,17 +302,14 @@ impl Periodic {
                 // The exact weights and tilts at the centre of wi's cell
                 // (`rgb_order_table`): sample and pdf read the same ones,
                 // so the density stays exact for them.
-                let (table, n_max) = self.rgb_order_table(self.surface.plan_period_um(b))?;
-                let entries = 2 * n_max + 1;
-                let base = wi_cell(wi, ORDER_CELLS_PER_AXIS) * (2 * entries) as f64;
-                let t = b.table(table.to_vec());
-                for (j, n) in rgb_order_list(n_max).into_iter().enumerate() {
-                    let w = b.gather(t, base + j as f64);
+                let cell = self.rgb_order_cell(b, wi)?;
+                for (j, &n) in cell.orders.iter().enumerate() {
+                    let w = cell.weight(b, j);
                     out.total = out.total + w;
                     out.n.push(b.c(n as f64));
                     out.weight.push(w);
                     out.zero.push(n == 0);
-                    out.tilt.push(b.gather(t, base + (entries + j) as f64));
+                    out.tilt.push(cell.tilt(b, j));
                 }
             }
         }
@@ -438,9 +463,11 @@ impl Periodic {
     /// ORDER_CELLS_PER_AXIS^2 cells over (wi.x, wi.y) (moved onto the rim
     /// where outside it, as the native `GratingTable`'s), the exact weights
     /// then the tilts of `rgb_order_list`, computed by running
-    /// `rgb_orders_exact`'s program on the CPU (made once per material).
-    /// A lane reads its cell's (2 gathers per order) in place of three
-    /// order weights per order; the weights only steer the sampling. None
+    /// `rgb_orders_exact`'s program on the CPU (made once per material),
+    /// then their total. A sample reads its cell's (2 gathers per order) in
+    /// place of three order weights per order; a density reads the total
+    /// and, per order, its pair where it can be non-zero. The weights only
+    /// steer the sampling. None
     /// for a material without an RGB eval program, which the JIT path
     /// cannot render in RGB (periods beyond ~20 um: the table would take
     /// about a second to make and be unused).
@@ -463,6 +490,17 @@ impl Periodic {
         Some((table, n_max))
     }
 
+    /// wi's cell of the RGB order table, read where needed.
+    fn rgb_order_cell<'a>(&self, b: &'a Builder, wi: Vec3<'a>) -> Option<RgbOrderCell<'a>> {
+        let (table, n_max) = self.rgb_order_table(self.surface.plan_period_um(b))?;
+        let entries = 2 * n_max + 1;
+        Some(RgbOrderCell {
+            table: b.table(table.to_vec()),
+            base: wi_cell(wi, ORDER_CELLS_PER_AXIS) * (2 * entries + 1) as f64,
+            orders: rgb_order_list(n_max),
+        })
+    }
+
     /// `rgb_order_table` for orders -n_max..=n_max.
     fn make_rgb_order_table(&self, n_max: usize) -> Vec<f32> {
         let b = Builder::new();
@@ -470,7 +508,18 @@ impl Periodic {
         let powers = PowerProgram::new(&b, &self.surface);
         let (weights, tilts) = self.rgb_orders_exact(&b, &powers, wi, n_max);
         let outputs: Vec<Value> = weights.into_iter().chain(tilts).collect();
-        tabulate_over_wi_cells(&b.finish(&outputs), ORDER_CELLS_PER_AXIS, &[vec![]])
+        let entries = 2 * n_max + 1;
+        let table = tabulate_over_wi_cells(&b.finish(&outputs), ORDER_CELLS_PER_AXIS, &[vec![]]);
+        // Each cell's total weight last: the f32 sum, in the list's order,
+        // of the f32 weights, which is what the sampling program adds up
+        // (so that its pdf, which reads the total, normalises alike).
+        table
+            .chunks(2 * entries)
+            .flat_map(|cell| {
+                let total = cell[..entries].iter().fold(0.0f32, |sum, &w| sum + w);
+                cell.iter().copied().chain([total])
+            })
+            .collect()
     }
 
     pub(super) fn sampling_program<'a>(
@@ -567,75 +616,102 @@ impl Periodic {
         wo: Vec3<'a>,
         lambda_nm: Option<Value<'a>>,
     ) -> Option<Value<'a>> {
-        let powers = PowerProgram::new(b, &self.surface);
-        let orders = self.orders(b, &powers, wi, lambda_nm)?;
-        let lobe_ok = orders.total.gt(0.0) & orders.total.finite();
-        let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
         let defensive = (wo[2] * (1.0 / PI) + 0.5 / PI) * 0.5;
         let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
-        let period_nm = b.built(1000.0 * self.surface.period_um);
-        let inv_total = 1.0 / orders.total;
-        let mut lobe = b.c(0.0);
-        match lambda_nm {
+        let (lobe, total) = match lambda_nm {
             Some(lambda) => {
+                let powers = PowerProgram::new(b, &self.surface);
+                let orders = self.orders(b, &powers, wi, Some(lambda))?;
                 let sigma = self.sigma(lambda);
                 let inv2s2 = 0.5 / (sigma * sigma);
                 let du = lambda * self.inv_period_nm(b);
-                for (&n, &w) in orders.n.iter().zip(&orders.weight) {
-                    let d = u - n * du;
-                    let e = (d * d + v * v) * inv2s2;
-                    lobe = lobe + w * (-e).exp();
-                }
-                lobe = lobe * inv2s2 * (1.0 / PI);
-            }
-            None => {
-                let zero = zero_order_nodes();
-                for (((&n, &w), &kappa), &is_zero) in orders
-                    .n
-                    .iter()
-                    .zip(&orders.weight)
-                    .zip(&orders.tilt)
-                    .zip(&orders.zero)
-                {
-                    if !is_zero {
-                        // lambda on this order's rainbow at u (w = 0 where
-                        // the order is not taken, n = 0 among them), only
-                        // where some lane takes it and lambda is inside the
-                        // band (outside, the band density is 0: most
-                        // orders at a given wo).
-                        let nn = n.eq(0.0).select(1.0, n);
-                        let lambda = u * period_nm / nn;
-                        let (lo, hi) = RGB_BAND_NM;
-                        let on_band = lambda.gt(lo) & lambda.lt(hi);
-                        let [term] = b.region(w.gt(0.0) & on_band, || {
-                            let small = kappa.abs().lt(1e-3);
-                            let kk = small.select(1.0, kappa);
-                            let c = band_cdf(b, lambda);
-                            let tilt = small.select(1.0, kk * (kk * c).exp() / (kk.exp() - 1.0));
-                            let rho = band_density_program(b, lambda);
-                            let sigma = self.sigma(lambda.max(1.0));
-                            let nv = (-(v * v) / (sigma * sigma * 2.0)).exp()
-                                / (sigma * (2.0 * PI).sqrt());
-                            [w * rho * tilt * (period_nm / nn.abs()) * nv]
-                        });
-                        lobe = lobe + term;
-                    } else {
-                        // Order 0: the nodes' Gaussians.
-                        let rho2 = u * u + v * v;
-                        let mut g = b.c(0.0);
-                        for &(centre, m) in &zero {
-                            let s = centre / (2000.0 * PI * SQRT_2 * self.surface.coherence_um);
-                            let inv2s2 = 0.5 / (s * s);
-                            g = g + (rho2 * b.built(-inv2s2)).exp() * b.built(m * inv2s2 / PI);
-                        }
-                        lobe = lobe + w * g;
+                // Every order's Gaussian is 0 in f32 where v alone puts
+                // its exponent past F32_EXP_UNDERFLOW.
+                let ev = v * v * inv2s2;
+                let [lobe] = b.region(ev.lt(F32_EXP_UNDERFLOW), || {
+                    let mut lobe = b.c(0.0);
+                    for (&n, &w) in orders.n.iter().zip(&orders.weight) {
+                        let d = u - n * du;
+                        lobe = lobe + w * (-d.fma(d * inv2s2, ev)).exp();
                     }
-                }
+                    [lobe]
+                });
+                (lobe * inv2s2 * (1.0 / PI), orders.total)
             }
-        }
-        let lobe = lobe_ok.select(lobe * inv_total, 0.0);
+            None => self.rgb_lobe_density(b, wi, u, v)?,
+        };
+        let lobe_ok = total.gt(0.0) & total.finite();
+        let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
+        let lobe = lobe_ok.select(lobe * (1.0 / total), 0.0);
         let density = p_def * defensive + (1.0 - p_def) * lobe * wo[2];
         Some(wo[2].gt(MIN_COS).select(density, 0.0))
+    }
+
+    /// The RGB lobe's density over (u, v), before its division by the
+    /// total weight, and the total (`rgb_order_table`'s, the f32 sum the
+    /// sampling program forms). Each order's where the wavelength of its
+    /// rainbow at u lies inside the band (a region: outside, the band
+    /// density is 0, as for most orders at a given wo), its weight and tilt
+    /// read there; order 0's Gaussians where the widest is above f32's
+    /// underflow. The sampling program reads every weight to pick an
+    /// order; a density reads one cell's total and the orders its packet
+    /// is near, twice per path vertex (towards the light and the sample).
+    fn rgb_lobe_density<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        u: Value<'a>,
+        v: Value<'a>,
+    ) -> Option<(Value<'a>, Value<'a>)> {
+        let cell = self.rgb_order_cell(b, wi)?;
+        let period_nm = b.built(1000.0 * self.surface.period_um);
+        let zero = zero_order_nodes();
+        let mut lobe = b.c(0.0);
+        for (j, &n) in cell.orders.iter().enumerate() {
+            let [term] = if n != 0 {
+                let nn = n as f64;
+                let lambda = u * period_nm * (1.0 / nn);
+                let (lo, hi) = RGB_BAND_NM;
+                let on_band = lambda.gt(lo) & lambda.lt(hi);
+                // Across the grooves a Gaussian of width sigma: 0 in f32
+                // where |v| passes sqrt(2 F32_EXP_UNDERFLOW) sigma (most
+                // lanes towards a light: on the band of a few orders at u,
+                // but far from their lines in v).
+                let sigma = self.sigma(lambda.max(1.0));
+                let near = (v * v).lt(sigma * sigma * (2.0 * F32_EXP_UNDERFLOW));
+                b.region(on_band & near, || {
+                    let (w, kappa) = (cell.weight(b, j), cell.tilt(b, j));
+                    let small = kappa.abs().lt(1e-3);
+                    let kk = small.select(1.0, kappa);
+                    let c = band_cdf(b, lambda);
+                    let tilt = small.select(1.0, kk * (kk * c).exp() / (kk.exp() - 1.0));
+                    let rho = band_density_program(b, lambda);
+                    let nv = (-(v * v) / (sigma * sigma * 2.0)).exp() / (sigma * (2.0 * PI).sqrt());
+                    let term = w * rho * tilt * (period_nm * (1.0 / nn.abs())) * nv;
+                    [w.gt(0.0).select(term, 0.0)]
+                })
+            } else {
+                // Order 0: the nodes' Gaussians, e^-(rho^2 / 2 s^2) each.
+                let rho2 = u * u + v * v;
+                let inv2s2: Vec<f64> = zero
+                    .iter()
+                    .map(|&(centre, _)| {
+                        let s = centre / (2000.0 * PI * SQRT_2 * self.surface.coherence_um);
+                        0.5 / (s * s)
+                    })
+                    .collect();
+                let widest = inv2s2.iter().copied().fold(f64::INFINITY, f64::min);
+                b.region((rho2 * b.built(widest)).lt(F32_EXP_UNDERFLOW), || {
+                    let mut g = b.c(0.0);
+                    for (&(_, m), &a) in zero.iter().zip(&inv2s2) {
+                        g = g + (rho2 * b.built(-a)).exp() * b.built(m * a / PI);
+                    }
+                    [cell.weight(b, j) * g]
+                })
+            };
+            lobe = lobe + term;
+        }
+        Some((lobe, cell.total(b)))
     }
 }
 
