@@ -67,6 +67,21 @@ pub fn fast_exp_vectorisable(x: f64) -> f64 {
     p * f64::from_bits(t.to_bits().wrapping_add(1023) << 52)
 }
 
+/// Taylor coefficients of sin r / r in r^2: (-1)^k / (2k + 1)!, k = 0..9
+/// (the program version, `program::special::sin_squared`, takes k <= 6).
+pub(crate) const SIN_OVER_X: [f64; 10] = [
+    1.0,
+    -1.0 / 6.0,
+    1.0 / 120.0,
+    -1.0 / 5_040.0,
+    1.0 / 362_880.0,
+    -1.0 / 39_916_800.0,
+    1.0 / 6_227_020_800.0,
+    -1.0 / 1_307_674_368_000.0,
+    1.0 / 355_687_428_096_000.0,
+    -1.0 / 121_645_100_408_832_000.0,
+];
+
 /// sin^2(x), branch-free so that loops over it vectorise (the grating
 /// kernels take one per wavelength node). sin^2 has period pi: x is reduced
 /// to r in [-pi/2, pi/2] (Cody-Waite with FMA, exact to ~1e-16 |x| / pi
@@ -82,21 +97,9 @@ pub fn sin_squared(x: f64) -> f64 {
     let n = x.mul_add(std::f64::consts::FRAC_1_PI, SHIFT) - SHIFT;
     let r = (-n).mul_add(PI_LO, (-n).mul_add(PI_HI, x));
     let r2 = r * r;
-    // Coefficients of sin r / r in r^2: (-1)^k / (2k + 1)!.
-    const C: [f64; 10] = [
-        1.0,
-        -1.0 / 6.0,
-        1.0 / 120.0,
-        -1.0 / 5_040.0,
-        1.0 / 362_880.0,
-        -1.0 / 39_916_800.0,
-        1.0 / 6_227_020_800.0,
-        -1.0 / 1_307_674_368_000.0,
-        1.0 / 355_687_428_096_000.0,
-        -1.0 / 121_645_100_408_832_000.0,
-    ];
-    let mut p = C[9];
-    for &c in C[..9].iter().rev() {
+
+    let mut p = SIN_OVER_X[9];
+    for &c in SIN_OVER_X[..9].iter().rev() {
         p = p.mul_add(r2, c);
     }
     let s = r * p;

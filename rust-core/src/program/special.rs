@@ -21,20 +21,13 @@ pub fn sin_squared(x: Value<'_>) -> Value<'_> {
     let n = x.fma(1.0 / PI, 0.5).floor();
     let r = (-n).fma(PI_LO, (-n).fma(PI_HI, x));
     let r2 = r * r;
-    // sin r / r in r^2: (-1)^k / (2k + 1)!, k = 1..6, then 1.
-    const C: [f64; 6] = [
-        -1.0 / 6.0,
-        1.0 / 120.0,
-        -1.0 / 5_040.0,
-        1.0 / 362_880.0,
-        -1.0 / 39_916_800.0,
-        1.0 / 6_227_020_800.0,
-    ];
-    let mut p = r2.fma(C[5], C[4]);
-    for &c in C[..4].iter().rev() {
-        p = p.fma(r2, c);
+    // sin r / r in r^2, to k = 6.
+    let c = &crate::special::SIN_OVER_X;
+    let mut p = r2.fma(c[6], c[5]);
+    for &ck in c[1..5].iter().rev() {
+        p = p.fma(r2, ck);
     }
-    let s = r * p.fma(r2, 1.0);
+    let s = r * p.fma(r2, c[0]);
     s * s
 }
 
