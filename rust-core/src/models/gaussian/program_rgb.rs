@@ -332,8 +332,7 @@ pub(crate) fn weighted_sum<'a>(
     }
     let (bins, rows) = rule.export_weights(fresnel);
     let n = rule.len();
-    let flat: Vec<f64> = rows.iter().flatten().copied().collect();
-    let Some((phi, a)) = low_rank(&flat, bins + 1, 3 * n, 1e-6) else {
+    let Some((phi, a)) = low_rank(rows.as_flattened(), bins + 1, 3 * n, 1e-6) else {
         return rule.integrate_program(b, fresnel, cos, values);
     };
     let rank = a.len();

@@ -146,9 +146,7 @@ struct Orders<'a> {
     /// Unnormalised probabilities (0 where not taken) and their sum.
     weight: Vec<Value<'a>>,
     total: Value<'a>,
-    /// RGB: whether the entry is order 0 (the mirror lobe), and the tilt
-    /// kappa of its wavelengths.
-    zero: Vec<bool>,
+    /// RGB: the tilt kappa of each entry's wavelengths.
     tilt: Vec<Value<'a>>,
 }
 
@@ -250,7 +248,12 @@ impl Periodic {
     /// sigma(lambda) of an order's Gaussian in u and v: 1 / (sqrt 2 k l).
     fn sigma<'a>(&self, lambda: Value<'a>) -> Value<'a> {
         let b = lambda.builder();
-        lambda * b.built(1.0 / (2000.0 * PI * SQRT_2 * self.surface.coherence_um))
+        lambda * b.built(self.sigma_per_nm())
+    }
+
+    /// sigma / lambda (lambda in nm), for `sigma` and fixed wavelengths.
+    fn sigma_per_nm(&self) -> f64 {
+        1.0 / (2000.0 * PI * SQRT_2 * self.surface.coherence_um)
     }
 
     /// The orders, their probabilities and (RGB) band intervals at wi.
@@ -265,7 +268,6 @@ impl Periodic {
             n: Vec::new(),
             weight: Vec::new(),
             total: b.c(0.0),
-            zero: Vec::new(),
             tilt: Vec::new(),
         };
         match lambda {
@@ -308,7 +310,6 @@ impl Periodic {
                     out.total = out.total + w;
                     out.n.push(b.c(n as f64));
                     out.weight.push(w);
-                    out.zero.push(n == 0);
                     out.tilt.push(cell.tilt(b, j));
                 }
             }
@@ -467,10 +468,9 @@ impl Periodic {
     /// then their total. A sample reads its cell's (2 gathers per order) in
     /// place of three order weights per order; a density reads the total
     /// and, per order, its pair where it can be non-zero. The weights only
-    /// steer the sampling. None
-    /// for a material without an RGB eval program, which the JIT path
-    /// cannot render in RGB (periods beyond ~20 um: the table would take
-    /// about a second to make and be unused).
+    /// steer the sampling. None for a material without an RGB eval
+    /// program, which the JIT path cannot render in RGB (periods beyond ~20
+    /// um: the table would take about a second to make and be unused).
     /// `period_um`: the period the programs plan for (`plan_period_um`;
     /// the table is kept for the first one asked, the only one a material's
     /// sampling programs ask for).
@@ -696,7 +696,7 @@ impl Periodic {
                 let inv2s2: Vec<f64> = zero
                     .iter()
                     .map(|&(centre, _)| {
-                        let s = centre / (2000.0 * PI * SQRT_2 * self.surface.coherence_um);
+                        let s = centre * self.sigma_per_nm();
                         0.5 / (s * s)
                     })
                     .collect();
