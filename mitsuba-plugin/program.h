@@ -453,8 +453,25 @@ private:
             if (in.op == Op::If) {
                 const Region &reg = code.regions[in.b];
                 RegionState live_in;
+                // A differentiable live-in of width 1 (a parameter, or a
+                // value of parameters alone) enters at the lanes' width:
+                // with width-1 values carrying gradients through a symbolic
+                // if_stmt, Dr.Jit 1.5's reverse mode came out about n times
+                // too large over n lanes (a grating's period, height, width
+                // and coherence length in the RGB programs; forward mode
+                // was right; tests/test_gradients.py). The broadcast's
+                // adjoint, outside the region, sums over the lanes once.
+                size_t lanes = dr::width(m[in.a]);
                 for (uint32_t r : reg.in_f)
+                    lanes = std::max(lanes, dr::width(f[r]));
+                for (uint32_t r : reg.in_f) {
+                    if constexpr (dr::is_diff_v<Float>)
+                        if (lanes > 1 && dr::width(f[r]) == 1 && dr::grad_enabled(f[r])) {
+                            live_in.f.push_back(f[r] + dr::zeros<Float>(lanes));
+                            continue;
+                        }
                     live_in.f.push_back(f[r]);
+                }
                 for (uint32_t r : reg.in_m)
                     live_in.m.push_back(m[r]);
                 auto body = [code_ptr, region = in.b, start = i, tables,
