@@ -376,7 +376,6 @@ fn energy_derivatives_follow_rebuilt_tables() {
             &[EvalSpectral, EvalRgb],
         ),
     ];
-    let step = energy::DERIVATIVE_STEP;
     for (json, kinds) in cases {
         let base = MaterialParams::from_json(json).unwrap();
         let with = Brdf::new(MaterialParams {
@@ -407,6 +406,7 @@ fn energy_derivatives_follow_rebuilt_tables() {
                     })
                     .unwrap()
                 };
+                let step = energy::derivative_step(id);
                 let (up, down) = (at(v * step.exp()), at(v / step.exp()));
                 // d f / d ln p of a program by a central difference of 1e-4.
                 let h = 1e-4;

@@ -171,7 +171,7 @@ impl Brdf {
                 .into_iter()
                 .filter(|(id, _)| self.gradients.contains(id))
                 .filter_map(|(id, p0)| {
-                    let step = energy::DERIVATIVE_STEP.exp();
+                    let step = energy::derivative_step(id).exp();
                     let (below, above) = (at(id, p0 / step), at(id, p0 * step));
                     TableDerivative::new(id, p0, centre, below.as_deref(), above.as_deref())
                 })
