@@ -18,9 +18,9 @@ COLD_SECONDS = {
     'test_plugin.py': 70,
     'test_textures.py': 48,
     'test_plugin_usability.py': 28,
+    'test_compare.py': 25,  # 2026-12-05: 39.5 s cold on the AMD, where it was 15.7
     'test_wheel.py': 20,
     'test_core_binding.py': 17,
-    'test_compare.py': 10,
     'test_animation.py': 8,
 }
 
