@@ -62,8 +62,9 @@ Diffraction BSDF (:monosp:`diffraction`)
  * - sigma_um
    - |float| or |texture|
    - Gaussian surfaces: rms height (JIT variants: also a texture, point by point,
-     up to its largest value or ``sigma_um_max``); fractal surfaces: rms height
-     difference over ``lag_um``. Micrometres, in [1e-6, 100]. (Default: none, required)
+     up to its largest value or ``sigma_um_max``; one holding NaN is refused);
+     fractal surfaces: rms height difference over ``lag_um``. Micrometres, in
+     [1e-6, 100]. (Default: none, required)
    - |exposed|, |differentiable|
  * - corr_um
    - |float|
@@ -161,7 +162,7 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |float| or |texture|
    - Rotation of the tangent frame (the tracks' periodic direction, the
      brushing direction) about the normal, in degrees, in [-360, 360]; a
-     texture (a twist map) turns it point by point. (Default: 0)
+     texture (a twist map, finite values) turns it point by point. (Default: 0)
    - |exposed|, |differentiable|
  * - tracks
    - |string|
@@ -198,10 +199,15 @@ limit; a grating period that lets no diffraction order out) are reported as
 warnings in Mitsuba's log, once per material (the core's
 ``stam_brdf_warnings``), and listed in the object's string form.
 
-The parameters the user gives, ``twist`` and ``tracks`` always and
-``center_u``, ``center_v`` with concentric tracks are exposed through
-``mi.traverse``. In the AD variants (``llvm_ad_*``, ``cuda_ad_*``) the
-numbers the material's programs read are differentiable (the Gaussian
+Every parameter is exposed through ``mi.traverse``: the ones the user
+gives, ``twist`` and ``tracks`` always, ``center_u``, ``center_v`` with
+concentric tracks, and the core's defaults of the keys left out (a compact
+disc's ``period_um``, ``coherence_um``, ``profile``, ``height_um``,
+``width_um``; a default ``fresnel``, ``energy``, ...: the values the core
+took, ``stam_brdf_params_json``), with the flags they have when written. A
+default stays out of the core's JSON until it is changed (the material is
+built from the user's keys alone). In the AD variants (``llvm_ad_*``,
+``cuda_ad_*``) the numbers the material's programs read are differentiable (the Gaussian
 model's ``sigma_um`` and correlation lengths, the fractal's ``sigma_um``
 and ``lag_um``, a constant ``fresnel``, ``eta`` and ``k``, ``twist`` of anisotropic
 materials, a grating's period, coherence, height and width;
@@ -323,10 +329,8 @@ public:
         // Plugin-level parameters are handled here; everything else is
         // forwarded to the core under its own name (the core refuses
         // unknown keys with a message naming them).
-        size_t count = 0;
-        for (auto it = props.begin(); it != props.end(); ++it)
-            ++count;
-        m_params.reserve(count + 2); // never reallocated: traverse() hands out pointers
+        // m_params grows only here (the user's keys, then the core's
+        // defaults): traverse() hands out pointers into it
 
         try {
             bool has_center = false;
@@ -336,8 +340,9 @@ public:
                 PType type = it->type();
 
                 if (name == "twist" && type == PType::Object) {
-                    // A twist map (degrees; any texture, unbounded)
+                    // A twist map (degrees; any texture, unbounded, no NaN)
                     m_twist_texture = props.get_unbounded_texture<Texture>("twist");
+                    m_textures.refuse_nan("twist", m_twist_texture.get(), true);
                 } else if (type == PType::Object && m_textures.take(props, name)) {
                     // sigma_um, height_um: a texture (param_textures.h)
                 } else if (name == "twist") {
@@ -395,6 +400,10 @@ public:
             m_textures.attach(m_params);
             check_frame();
             commit(build_core());
+            // The core's defaults of the keys not given, exposed by traverse()
+            // (left out of the core's JSON while unchanged: the same core)
+            diffraction_detail::add_defaults(m_params, stam_brdf_params_json(m_core.get()));
+            update_param_array();
         } catch (const ParamError &e) {
             Throw("diffraction: %s", e.what());
         }
@@ -573,6 +582,7 @@ private:
         std::vector<Param> params;
         ScalarFloat twist = 0.f, center_u = 0.5f, center_v = 0.5f;
         Tracks tracks = Tracks::Linear;
+        bool tracks_given = false;
     };
 
     /// A core material built from the current parameters, not yet in use
@@ -599,6 +609,7 @@ private:
     void set_tracks(const std::string &t) {
         m_tracks = tracks_are_linear(t) ? Tracks::Linear : Tracks::Concentric;
         m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
+        m_tracks_given = true;
     }
 
     /// Whether the material's programs read the parameter `id` (JIT
@@ -693,7 +704,7 @@ private:
     void check_frame() const { check_frame_params(m_twist, m_center_u, m_center_v); }
 
     State snapshot() const {
-        return State{ m_params, m_twist, m_center_u, m_center_v, m_tracks };
+        return State{ m_params, m_twist, m_center_u, m_center_v, m_tracks, m_tracks_given };
     }
 
     /// Back to a snapshot, in place: traverse() handed out pointers into
@@ -707,6 +718,7 @@ private:
         m_center_u = s.center_u;
         m_center_v = s.center_v;
         m_tracks = s.tracks;
+        m_tracks_given = s.tracks_given;
         m_tracks_holder.set_plugin_name(tracks_name(m_tracks));
     }
 
@@ -728,6 +740,8 @@ private:
     }
 
     void commit(Core &&c) {
+        // Defaults nobody changed follow the new core's (plugin_params.h)
+        diffraction_detail::refresh_defaults(m_params, stam_brdf_params_json(c.ptr.get()));
         m_core = std::move(c.ptr);
         m_json = std::move(c.json);
         m_core_flags = c.flags;
@@ -791,7 +805,9 @@ private:
     }
 
     [[noreturn]] void throw_mesh_without_uv(const std::string &mesh) const {
-        Throw("diffraction: %s", mesh_without_uv_message(tracks_name(m_tracks), mesh));
+        // Names the tracks only where the user chose them
+        Throw("diffraction: %s",
+              mesh_without_uv_message(m_tracks_given ? tracks_name(m_tracks) : nullptr, mesh));
     }
 
     /// JIT variants, recorded code: throws for a registered mesh without
@@ -964,6 +980,7 @@ private:
     Float m_twist_diff = 0.f;               // JIT variants: `twist` through mi.traverse
     Tracks m_tracks = Tracks::Linear;
     Properties m_tracks_holder{ "linear" }; // `tracks` through mi.traverse
+    bool m_tracks_given = false;            // `tracks` set by the user (messages)
     ScalarFloat m_center_u = 0.5f, m_center_v = 0.5f;
     State m_saved;                          // the last accepted parameters
 

@@ -6,7 +6,8 @@
  * value up to the texture's largest (a Gaussian's `sigma_um_max`, a sine
  * profile's `height_um_max`; a rect profile's powers are a closed form in
  * the height); this header gives each lane the texture's value there.
- * The twist map is diffraction.cpp's (a frame rotation, every variant). No
+ * The twist map is diffraction.cpp's (a frame rotation, every variant);
+ * maps holding NaN (a twist map: also infinities) are refused here. No
  * physics.
  */
 #pragma once
@@ -75,6 +76,7 @@ template <typename Float, typename Spectrum> struct ParamTextures {
             } else {
                 std::string surface = text_of(params, "surface"),
                             profile = text_of(params, "profile");
+                refuse_nan(e.name, e.texture.get(), false);
                 double max_um;
                 bool sine = false;
                 if (e.id == STAM_PARAM_SIGMA_UM) {
@@ -171,20 +173,63 @@ private:
         return p;
     }
 
-    /// The texture's largest value: at every texel centre of a bitmap
-    /// (where a bilinear filter's maximum lies; up to 2048 per axis), on a
-    /// 256 x 256 grid for other textures.
-    static ScalarFloat largest(const Entry &e) {
-        ScalarVector2i res = e.texture->resolution();
+    /// The points at which a texture is looked at: every texel centre of a
+    /// bitmap (where a bilinear filter's extremes lie; up to 2048 per
+    /// axis), a 256 x 256 grid on other textures
+    static std::pair<uint32_t, uint32_t> grid(const Texture *t) {
+        ScalarVector2i res = t->resolution();
         auto axis = [](int r) { return (uint32_t) (r > 1 ? std::min(r, 2048) : 256); };
-        uint32_t nx = axis(res.x()), ny = axis(res.y());
+        return { axis(res.x()), axis(res.y()) };
+    }
+
+    /// JIT variants: the texture's values at the grid's points
+    static Float grid_values(const Texture *t) {
+        auto [nx, ny] = grid(t);
         UInt32 idx = dr::arange<UInt32>(nx * ny);
         SurfaceInteraction3f si = dr::zeros<SurfaceInteraction3f>(nx * ny);
         si.uv = Point2f((Float(idx % nx) + .5f) / (ScalarFloat) nx,
                         (Float(idx / nx) + .5f) / (ScalarFloat) ny);
-        Float v = dr::detach(e.texture->eval_1(si, true));
+        return dr::detach(t->eval_1(si, true));
+    }
+
+    /// The texture's largest finite value at the grid's points
+    static ScalarFloat largest(const Entry &e) {
+        Float v = grid_values(e.texture.get());
         v = dr::select(dr::isfinite(v), v, 0.f);
         return dr::slice(dr::max(v), 0);
+    }
+
+public:
+    /// Refuses, naming the parameter, a texture with NaN values at the
+    /// grid's points (and infinite ones where `refuse_infinite`): a map
+    /// that holds no number there is a broken map, not a value to guess
+    static void refuse_nan(const std::string &name, const Texture *t, bool refuse_infinite) {
+        auto [nx, ny] = grid(t);
+        size_t nan = 0, inf = 0;
+        if constexpr (dr::is_jit_v<Float>) {
+            Float v = grid_values(t);
+            nan = (size_t) dr::slice(dr::count(dr::isnan(v)), 0);
+            inf = (size_t) dr::slice(dr::count(dr::isinf(v)), 0);
+        } else {
+            SurfaceInteraction3f si = dr::zeros<SurfaceInteraction3f>();
+            for (uint32_t j = 0; j < ny; ++j)
+                for (uint32_t i = 0; i < nx; ++i) {
+                    si.uv = Point2f((i + .5f) / (ScalarFloat) nx, (j + .5f) / (ScalarFloat) ny);
+                    Float v = t->eval_1(si, true);
+                    nan += std::isnan(v);
+                    inf += std::isinf(v);
+                }
+        }
+        size_t bad = nan + (refuse_infinite ? inf : 0);
+        if (bad == 0)
+            return;
+        std::string what = nan && refuse_infinite && inf ? "NaN or infinite values"
+                           : nan                          ? "NaN values"
+                                                          : "infinite values";
+        throw ParamError("parameter '" + name + "': the texture holds " + what + " (" +
+                         std::to_string(bad) + " of the " + std::to_string((size_t) nx * ny) +
+                         " points looked at); every value must be a number" +
+                         (name == "twist" ? " (degrees)" : " (micrometres)"));
     }
 };
 

@@ -2,7 +2,8 @@
  * from the plugin's properties: string escaping, numbers that read back
  * exactly, the height list of a tabulated profile in its three written
  * forms, and the core's unknown-key message completed with the plugin's
- * own keys.
+ * own keys; and a small reader of the core's resolved parameters
+ * (stam_brdf_params_json), whose defaults the plugin exposes.
  */
 #pragma once
 
@@ -14,6 +15,7 @@
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 NAMESPACE_BEGIN(mitsuba)
@@ -227,6 +229,152 @@ inline std::string with_plugin_keys(const std::string &msg,
     if (!best.empty())
         out += "; did you mean '" + best + "'?";
     return out;
+}
+
+/// A JSON value as the core writes it (stam_brdf_params_json): enough of
+/// JSON to read the resolved parameters (objects keep their members' order)
+struct JsonValue {
+    enum Type { Null, Bool, Number, String, Array, Object } type = Null;
+    bool boolean = false;
+    double number = 0.0;
+    std::string text;
+    std::vector<JsonValue> items;
+    std::vector<std::pair<std::string, JsonValue>> members;
+
+    const JsonValue *get(const std::string &key) const {
+        for (const auto &m : members)
+            if (m.first == key)
+                return &m.second;
+        return nullptr;
+    }
+};
+
+/// Parses JSON text; throws ParamError where it is not JSON
+inline JsonValue parse_json(const std::string &text) {
+    struct Parser {
+        const std::string &s;
+        size_t i = 0;
+        [[noreturn]] void fail(const char *what) {
+            throw ParamError(std::string("the core's parameters are not JSON (") + what +
+                             " at " + std::to_string(i) + ")");
+        }
+        void space() {
+            while (i < s.size() && is_space(s[i]))
+                ++i;
+        }
+        bool eat(char c) {
+            space();
+            if (i < s.size() && s[i] == c) {
+                ++i;
+                return true;
+            }
+            return false;
+        }
+        bool word(const char *w) {
+            size_t n = std::char_traits<char>::length(w);
+            if (s.compare(i, n, w) != 0)
+                return false;
+            i += n;
+            return true;
+        }
+        std::string string() {
+            if (!eat('"'))
+                fail("a string expected");
+            std::string out;
+            while (i < s.size() && s[i] != '"') {
+                char c = s[i++];
+                if (c != '\\') {
+                    out += c;
+                    continue;
+                }
+                if (i >= s.size())
+                    fail("an escape cut short");
+                char e = s[i++];
+                switch (e) {
+                    case 'n': out += '\n'; break;
+                    case 't': out += '\t'; break;
+                    case 'r': out += '\r'; break;
+                    case 'b': out += '\b'; break;
+                    case 'f': out += '\f'; break;
+                    case 'u': {
+                        if (i + 4 > s.size())
+                            fail("a \\u escape cut short");
+                        unsigned long cp = std::strtoul(s.substr(i, 4).c_str(), nullptr, 16);
+                        i += 4;
+                        // UTF-8 of the code point (the core escapes only
+                        // control characters)
+                        if (cp < 0x80) {
+                            out += (char) cp;
+                        } else if (cp < 0x800) {
+                            out += (char) (0xC0 | (cp >> 6));
+                            out += (char) (0x80 | (cp & 0x3F));
+                        } else {
+                            out += (char) (0xE0 | (cp >> 12));
+                            out += (char) (0x80 | ((cp >> 6) & 0x3F));
+                            out += (char) (0x80 | (cp & 0x3F));
+                        }
+                        break;
+                    }
+                    default: out += e;
+                }
+            }
+            if (!eat('"'))
+                fail("an unterminated string");
+            return out;
+        }
+        JsonValue value() {
+            JsonValue v;
+            space();
+            if (i >= s.size())
+                fail("a value expected");
+            char c = s[i];
+            if (c == '{') {
+                ++i;
+                v.type = JsonValue::Object;
+                if (eat('}'))
+                    return v;
+                do {
+                    std::string key = string();
+                    if (!eat(':'))
+                        fail("':' expected");
+                    v.members.emplace_back(key, value());
+                } while (eat(','));
+                if (!eat('}'))
+                    fail("'}' expected");
+            } else if (c == '[') {
+                ++i;
+                v.type = JsonValue::Array;
+                if (eat(']'))
+                    return v;
+                do
+                    v.items.push_back(value());
+                while (eat(','));
+                if (!eat(']'))
+                    fail("']' expected");
+            } else if (c == '"') {
+                v.type = JsonValue::String;
+                v.text = string();
+            } else if (word("true") || word("false")) {
+                v.type = JsonValue::Bool;
+                v.boolean = s[i - 1] == 'e' && s[i - 2] == 'u';
+            } else if (word("null")) {
+                v.type = JsonValue::Null;
+            } else {
+                char *end = nullptr;
+                v.type = JsonValue::Number;
+                v.number = std::strtod(s.c_str() + i, &end);
+                if (end == s.c_str() + i)
+                    fail("a value expected");
+                i = (size_t) (end - s.c_str());
+            }
+            return v;
+        }
+    } parser{ text };
+    JsonValue v = parser.value();
+    parser.space();
+    if (parser.i != text.size())
+        parser.fail("text after the value");
+    return v;
 }
 
 NAMESPACE_END(diffraction_detail)

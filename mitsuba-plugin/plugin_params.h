@@ -1,7 +1,8 @@
 /* plugin_params.h: the diffraction plugin's parameters as the user gave
- * them (diffraction.cpp): each one's kind, its value as mi.traverse exposes
- * it, and the core's JSON built from them (params_json.h has the JSON
- * helpers). No physics.
+ * them (diffraction.cpp), and the core's defaults of those not given
+ * (stam_brdf_params_json), so that mi.traverse exposes every parameter:
+ * each one's kind, its value as mi.traverse exposes it, and the core's
+ * JSON built from them (params_json.h has the JSON helpers). No physics.
  */
 #pragma once
 
@@ -39,6 +40,19 @@ template <typename Float> struct PluginParam {
     /// the registered type that carries it through mi.traverse (which has
     /// no strings)
     Properties holder;
+    /// Not given by the user: the core's default (add_defaults), left out
+    /// of the core's JSON while it holds that value, so that the core is
+    /// built from the user's keys alone until the default is changed
+    bool is_default = false;
+    double default_value = 0.0; // Number
+    std::string default_text;   // String
+
+    /// A default that nobody changed
+    bool at_default() const {
+        if (!is_default)
+            return false;
+        return kind == Number ? value == (ScalarFloat) default_value : source == default_text;
+    }
 
     /// A number given as `v`, forwarded under `name` (STAM_PARAM_* `id`)
     static PluginParam number(const std::string &name, double v, int id) {
@@ -116,6 +130,8 @@ std::string build_json(const std::vector<PluginParam<Float>> &params,
     using P = PluginParam<Float>;
     std::string top, nested;
     for (const P &p : params) {
+        if (p.at_default())
+            continue; // the core's own default
         std::string v;
         switch (p.kind) {
             case P::Number:
@@ -170,7 +186,92 @@ void describe(std::ostream &os, const std::vector<PluginParam<Float>> &params) {
             os << json_escape(p.text);
         else
             os << p.text;
+        if (p.at_default())
+            os << " (default)";
         os << "," << std::endl;
+    }
+}
+
+/// The core's value of parameter `p` in its resolved parameters (eta and k
+/// nested in "fresnel"), or null
+inline const JsonValue *resolved_value(const JsonValue &resolved, const std::string &name,
+                                       const std::string &group) {
+    if (group.empty())
+        return resolved.get(name);
+    const JsonValue *g = resolved.get(group);
+    return g && g->type == JsonValue::Object ? g->get(name) : nullptr;
+}
+
+/// Adds as parameters the core's defaults of the keys the user did not
+/// give (`resolved`: stam_brdf_params_json), numbers and strings, so that
+/// mi.traverse exposes them as if given: a compact disc's period_um,
+/// coherence_um, profile, height_um and width_um, a default fresnel (or k
+/// beside a given eta), energy, series_tolerance, rgb_nodes. Arrays and
+/// objects (gradients, a tabulated profile) are not. Left at their values,
+/// they stay out of the core's JSON (PluginParam::at_default).
+template <typename Float>
+void add_defaults(std::vector<PluginParam<Float>> &params, const std::string &resolved_json) {
+    using P = PluginParam<Float>;
+    JsonValue resolved = parse_json(resolved_json);
+    auto given = [&](const char *name) {
+        return std::any_of(params.begin(), params.end(),
+                           [&](const P &p) { return p.name == name; });
+    };
+    std::vector<P> added;
+    auto add = [&](const std::string &name, const JsonValue &v, const std::string &group) {
+        if (v.type == JsonValue::Number) {
+            P p = P::number(name, v.number, param_id(name));
+            p.group = group;
+            p.is_default = true;
+            p.default_value = v.number;
+            added.push_back(p);
+        } else if (v.type == JsonValue::String) {
+            P p;
+            p.name = name;
+            set_text(p, v.text);
+            p.is_default = true;
+            p.default_text = v.text;
+            added.push_back(p);
+        }
+    };
+    for (const auto &[key, v] : resolved.members) {
+        if (key == "surface" || key == "gradients" || given(key.c_str()))
+            continue;
+        if (key == "fresnel" && v.type == JsonValue::Object) {
+            // a complex index: the plugin's eta and k
+            for (const auto &[name, part] : v.members)
+                if (!given(name.c_str()))
+                    add(name, part, "fresnel");
+        } else if (key != "fresnel" || !(given("eta") || given("k"))) {
+            add(key, v, "");
+        }
+    }
+    params.insert(params.end(), added.begin(), added.end());
+}
+
+/// After a rebuild, the defaults nobody changed take the core's new values
+/// (a compact disc's coherence length and width follow its period); a
+/// value that did not move is left alone (with any gradient it carries)
+template <typename Float>
+void refresh_defaults(std::vector<PluginParam<Float>> &params, const std::string &resolved_json) {
+    using P = PluginParam<Float>;
+    JsonValue resolved = parse_json(resolved_json);
+    for (P &p : params) {
+        if (!p.at_default())
+            continue;
+        const JsonValue *v = resolved_value(resolved, p.name, p.group);
+        if (!v)
+            continue; // does not apply now (a rect's width with a sine profile)
+        if (p.kind == P::Number && v->type == JsonValue::Number &&
+            (dr::scalar_t<Float>) v->number != p.value) {
+            p.default_value = p.given = v->number;
+            p.value = (dr::scalar_t<Float>) v->number;
+            p.diff = Float(p.value);
+        } else if (p.kind != P::Number && v->type == JsonValue::String &&
+                   v->text != p.default_text) {
+            set_text(p, v->text);
+            p.default_text = v->text;
+        }
     }
 }
 

@@ -61,14 +61,20 @@ uint32_t shape_kind(const Shape<Float, Spectrum> *shape) {
 }
 
 /// Why a material with tracks cannot render on a mesh without texture
-/// coordinates (`mesh`: its id, may be empty)
+/// coordinates (`tracks`: the tracks the user set, null when not set;
+/// `mesh`: its id, may be empty)
 inline std::string mesh_without_uv_message(const char *tracks, const std::string &mesh) {
-    return std::string("tracks = \"") + tracks + "\" on a mesh without texture coordinates" +
-           (mesh.empty() ? "" : " (\"" + mesh + "\")") +
+    std::string where = std::string(" on a mesh without texture coordinates") +
+                        (mesh.empty() ? "" : " (\"" + mesh + "\")");
+    const char *lacks = ", which such a mesh lacks (Mitsuba gives each triangle its own). Give "
+                        "the mesh uv coordinates, or use a disk or rectangle shape.";
+    if (!tracks)
+        return "an anisotropic material (a grating, brushed metal)" + where +
+               ": its direction on the surface is defined through the uv parametrisation "
+               "(along dp/du; with tracks = \"concentric\", around a uv centre)" + lacks;
+    return std::string("tracks = \"") + tracks + "\"" + where +
            ": the tracks' direction is defined through the uv parametrisation (linear "
-           "tracks follow dp/du, concentric ones circle a uv centre), which such a mesh "
-           "lacks (Mitsuba gives each triangle its own). Give the mesh uv coordinates, or "
-           "use a disk or rectangle shape.";
+           "tracks follow dp/du, concentric ones circle a uv centre)" + lacks;
 }
 
 /// The direction (c, s) of the tracks in the local (xy) plane before the

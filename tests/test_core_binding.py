@@ -318,6 +318,113 @@ def test_warnings_name_implausible_values():
         assert b.warnings() == []
 
 
+def test_out_of_range_nanometres_get_the_hint():
+    """A length refused for being far above its range, which would be in it
+    read as nanometres, gets the hint an accepted one gets (the warning
+    above): sigma_um 250 meant 0.25 um."""
+    with pytest.raises(ValueError) as e:
+        stam_core.Brdf({'surface': 'gaussian', 'sigma_um': 250, 'corr_um': 2})
+    msg = str(e.value)
+    assert "'sigma_um' = 250 is out of range" in msg, msg
+    assert 'If sigma_um was meant in nanometres, it is sigma_um = 0.25 (micrometres).' in msg, msg
+    with pytest.raises(ValueError, match=r'period_um = 1\.6 \(micrometres\)'):
+        stam_core.Brdf({'surface': 'cd', 'period_um': 1600})
+    with pytest.raises(ValueError) as e:
+        stam_core.Brdf({'surface': 'gaussian', 'sigma_um': -1, 'corr_um': 2})
+    assert 'nanometres' not in str(e.value)
+
+
+def test_resolved_params_fill_the_defaults_and_build_the_same_material():
+    """stam_brdf_params_json: every key with the value the material took,
+    defaults filled in; a material built from it is the same (the same
+    resolved parameters for every shared test material, the same values)."""
+    with stam_core.Brdf({'surface': 'cd'}) as b:
+        assert b.resolved_params() == {
+            'surface': 'cd', 'period_um': 2.5, 'coherence_um': 50.0, 'profile': 'rect',
+            'height_um': 0.15, 'width_um': 0.5, 'fresnel': 'aluminium', 'energy': 'conserving',
+            'gradients': False}
+    with stam_core.Brdf(dict(GAUSSIAN, fresnel={'eta': 1.5})) as b:
+        r = b.resolved_params()
+        assert r['fresnel'] == {'eta': 1.5, 'k': 0.0} and r['rgb_nodes'] == 12, r
+        assert r['series_tolerance'] == 1e-5 and r['corr_um'] == 2.0, r
+    wo = hemisphere(32)
+    for e in stam_materials.load():
+        with stam_core.Brdf(e['params']) as b, stam_core.Brdf(b.resolved_params()) as again:
+            r = b.resolved_params()
+            assert again.resolved_params() == r, e['name']
+            for k, v in e['params'].items():     # what was given, as given
+                assert r[k] == v or k == 'fresnel' and isinstance(v, str), (e['name'], k)
+            if 'abi' in e['tags']:
+                assert np.array_equal(b.eval_rgb(WI, wo), again.eval_rgb(WI, wo)), e['name']
+
+
+def _docs_table_rows(path):
+    """{key: (unit cell, accepted cell, default cell)} of the first table of
+    docs/parameters.md's 'The core's keys' and of 'The plugin's own keys'."""
+    rows = {}
+    with open(path) as f:
+        text = f.read()
+    for section in ("## The core's keys", "## The plugin's own keys"):
+        body = text[text.index(section):]
+        body = body[:body.index('\n## ', 3)]
+        for line in body.splitlines():
+            if not line.startswith('| `'):
+                continue
+            cells = [c.strip() for c in re.split(r'(?<!\\)\|', line)[1:-1]]
+            keys = re.findall(r'`([a-z_]+)`', cells[0])
+            unit, accepted, default = (cells[3], cells[4], cells[5]) if len(cells) == 6 \
+                else (cells[2], cells[3], cells[4])
+            for k in keys:
+                rows.setdefault(k, (unit, accepted, default))
+    return rows
+
+
+def _interval(text, key):
+    """The interval written '<key> in [a, b]' (or (a, b]) with numeric ends,
+    else the first one."""
+    interval = r'([\[(])\s*(-?[\d.]+(?:e-?\d+)?)\s*,\s*(-?[\d.]+(?:e-?\d+)?)\s*\]'
+    m = re.search(r'\b%s in %s' % (key, interval), text) or re.search(interval, text)
+    return m and (m.group(1) == '(', float(m.group(2)), float(m.group(3)))
+
+
+def test_parameter_reference_agrees_with_the_docs():
+    """stam_parameter_reference (what `python -m stam_diffraction --help`
+    lists) and docs/parameters.md: every key of the reference is in the
+    docs' tables with the same unit, the same numeric range and, where the
+    docs give one number (or the disc's), the same default. (The Rust test
+    reference_agrees_with_the_readers holds the reference to the readers.)"""
+    ref = stam_core.parameter_reference()
+    rows = _docs_table_rows(os.path.join(ROOT, 'docs', 'parameters.md'))
+    docs = [(None, d) for d in ref['material']] + \
+        [(s['surface'], d) for s in ref['surfaces'] for d in s['keys']]
+    assert len(docs) >= 29
+    compared_ranges = compared_defaults = 0
+    for surface, d in docs:
+        key = d['key'].split('.')[-1]      # fresnel.eta: the plugin's eta
+        assert key in rows, (surface, key)
+        unit, accepted, default = rows[key]
+        assert unit == d['unit'], (surface, key, unit, d['unit'])
+        interval = _interval(accepted, key)
+        if d['min'] is not None and d['max'] is not None and key != 'fresnel':
+            assert interval == (d['min_open'], d['min'], d['max']), (surface, key, accepted)
+            compared_ranges += 1
+        elif key == 'fresnel':
+            assert interval == (True, 0.0, 1.0) == (d['min_open'], d['min'], d['max'])
+        if d['required']:
+            assert 'required' in default or surface == 'periodic' and 'otherwise required' in \
+                default or 'periodic: required' in default, (surface, key, default)
+        elif isinstance(d['default'], (int, float)) and not isinstance(d['default'], bool):
+            m = (re.search(r'cd: ([\d.e-]+)', default) if surface == 'cd' else None) \
+                or re.search(r'\b%s: ([\d.e-]+)' % key, default) \
+                or re.search(r'([\d.e-]+) \(%s\)' % surface, default) \
+                or re.match(r'([\d.e-]+)', default)
+            assert m and float(m.group(1)) == d['default'], (surface, key, default, d['default'])
+            compared_defaults += 1
+        elif isinstance(d['default'], str):
+            assert '"%s"' % d['default'] in default, (surface, key, default, d['default'])
+    assert compared_ranges >= 18 and compared_defaults >= 8, (compared_ranges, compared_defaults)
+
+
 # -- programs (stam_brdf_export_program, core.run_program) -----------------------
 
 ALL_MATERIALS = stam_materials.load()

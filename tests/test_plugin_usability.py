@@ -10,7 +10,9 @@
   and the closest one, metal spellings, the twist's range, k without eta;
 - plausibility warnings: logged once per material and shown by str();
 - mi.traverse updates are transactional (a refused update leaves the
-  material as it was, and later updates work) and carry string parameters.
+  material as it was, and later updates work) and carry string parameters;
+  mi.traverse exposes every parameter, the core's defaults included, with
+  the flags of a written one, and changing a default works.
 
 The oracle for the frames is the core itself (stam_diffraction.core): at a
 point whose periodic direction is expected along the world vector d, the
@@ -20,8 +22,10 @@ frame whose x axis is d, times cos theta_o.
 Run: make core plugin && .venv/bin/python -m pytest tests/test_plugin_usability.py
 """
 
+import json
 import math
 import os
+import re
 import sys
 
 import numpy as np
@@ -587,3 +591,128 @@ def test_tracks_and_profile_change_through_traverse(variant):
     refused(params, 'profile')
     assert params['profile'].plugin_name() == '[0, 0.2, 0.1]'
     assert np.array_equal(eval_at(g), ref)
+
+
+# ---------------------------------------------------------------------------
+# mi.traverse: every parameter, defaults included
+# ---------------------------------------------------------------------------
+
+def value_of(params, key):
+    v = params[key]
+    return v.plugin_name() if hasattr(v, 'plugin_name') else number(v)
+
+
+# Materials with defaults, and the same with every default written out
+WITH_DEFAULTS = [
+    (CD, dict(CD, period_um=2.5, coherence_um=50.0, profile='rect', height_um=0.15,
+              width_um=0.5, fresnel='aluminium', energy='conserving')),
+    (GAUSSIAN, dict(GAUSSIAN, series_tolerance=1e-5, rgb_nodes=12, fresnel='aluminium',
+                    energy='conserving')),
+    (dict(BRUSHED, eta=1.5), dict(BRUSHED, eta=1.5, k=0.0, series_tolerance=1e-5, rgb_nodes=12,
+                                  energy='conserving')),
+    (dict(PERIODIC, profile='sine', height_um=0.2),
+     dict(PERIODIC, profile='sine', height_um=0.2, fresnel='aluminium', energy='conserving')),
+]
+
+
+@pytest.mark.parametrize('variant', VARIANTS)
+@pytest.mark.parametrize('given,written', WITH_DEFAULTS)
+def test_traverse_exposes_every_parameter_with_the_flags_of_a_written_one(variant, given,
+                                                                          written):
+    """The keys left at their defaults are exposed with the core's values
+    (stam_brdf_params_json) and the flags they have when written (in the
+    AD variants differentiable exactly where the programs read them); the
+    core is built from the user's keys alone."""
+    use(variant)
+    b = mi.load_dict({'type': 'diffraction', **given})
+    params = mi.traverse(b)
+    full = mi.traverse(mi.load_dict({'type': 'diffraction', **written}))
+    assert set(params.keys()) == set(full.keys()), (params.keys(), full.keys())
+    for key in full.keys():
+        assert params.flags(key) == full.flags(key), key
+        assert value_of(params, key) == pytest.approx(value_of(full, key)), key
+    core_params = {k: v for k, v in given.items() if k not in ('eta', 'k')}
+    if 'eta' in given:
+        core_params['fresnel'] = {'eta': given['eta']}
+    with stam_core.Brdf(core_params) as core:
+        resolved = core.resolved_params()
+    for key, value in resolved.items():
+        if isinstance(value, dict):         # a complex index: the plugin's eta and k
+            for part, x in value.items():
+                assert value_of(params, part) == pytest.approx(x), part
+        elif key != 'gradients':
+            assert value_of(params, key) == pytest.approx(value), key
+    # The core is built from the user's keys alone
+    core_json = json.loads(re.search(r'core_json = (\{.*\}),', str(b)).group(1))
+    assert core_json == core_params, str(b)
+
+
+@pytest.mark.parametrize('variant', VARIANTS)
+def test_defaults_change_through_traverse(variant):
+    """params['period_um'] of a compact disc that left it at its default,
+    docs/guide.md's params['fresnel'] = 'gold' with fresnel left at its
+    default: the material is then the one with those values written; a
+    default that follows another key follows it (the disc's bump width is
+    at most its period); a refused default keeps its value."""
+    use(variant)
+    b = mi.load_dict({'type': 'diffraction', **CD})
+    params = mi.traverse(b)
+    params['period_um'] = 2.0
+    params.update()
+    assert np.array_equal(eval_at(b), eval_at(mi.load_dict({'type': 'diffraction', **CD,
+                                                            'period_um': 2.0})))
+    params['fresnel'] = 'gold'
+    params.update()
+    gold = {'type': 'diffraction', **CD, 'period_um': 2.0, 'fresnel': 'gold'}
+    assert np.array_equal(eval_at(b), eval_at(mi.load_dict(gold)))
+    assert params['fresnel'].plugin_name() == 'gold'
+    params['period_um'] = 0.4
+    params.update()
+    assert number(params['width_um']) == pytest.approx(0.4)    # at most the period
+    assert np.array_equal(eval_at(b), eval_at(mi.load_dict(dict(gold, period_um=0.4))))
+    params['height_um'] = -1.0
+    refused(params, 'height_um')
+    assert number(params['height_um']) == pytest.approx(0.15)
+    assert np.array_equal(eval_at(b), eval_at(mi.load_dict(dict(gold, period_um=0.4))))
+    # A Gaussian's defaults: fresnel (the guide's example), rgb_nodes
+    g = mi.load_dict({'type': 'diffraction', **GAUSSIAN})
+    params = mi.traverse(g)
+    params['fresnel'] = 'gold'
+    params['rgb_nodes'] = 16
+    params.update()
+    ref = mi.load_dict({'type': 'diffraction', **GAUSSIAN, 'fresnel': 'gold', 'rgb_nodes': 16})
+    assert np.array_equal(eval_at(g), eval_at(ref))
+
+
+def test_a_default_moved_within_the_drift_is_kept_by_later_rebuilds():
+    """JIT variants: a default moved by under 2% keeps the programs (the
+    value reaches them from memory); a later rebuild builds the core with
+    it."""
+    use('llvm_ad_rgb')
+    b = mi.load_dict({'type': 'diffraction', **CD})
+    params = mi.traverse(b)
+    params['period_um'] = 2.5 * 1.01
+    params.update()
+    assert 'core_json = {"surface": "cd"}' in str(b), str(b)     # no rebuild
+    params['energy'] = 'stam'
+    params.update()
+    assert '"period_um": 2.52' in str(b), str(b)
+    ref = mi.load_dict({'type': 'diffraction', **CD, 'period_um': 2.525, 'energy': 'stam'})
+    assert np.allclose(eval_at(b), eval_at(ref), rtol=1e-6)
+
+
+@pytest.mark.parametrize('variant', VARIANTS)
+def test_missing_uv_message_names_no_tracks_the_user_did_not_set(variant, tmp_path):
+    """An anisotropic material without `tracks` on a mesh without uv: the
+    error says what is missing without naming a tracks value the user never
+    wrote."""
+    use(variant)
+    obj = write_square(str(tmp_path / 'square.obj'), with_uv=False)
+    bsdf = mi.load_dict({'type': 'diffraction', **CD})
+    scene = shape_scene({'type': 'obj', 'filename': obj, 'bsdf': bsdf})
+    si = hits(scene, np.array(POINTS_MESH) - [3.0, 1.0, 0.0])
+    with pytest.raises(Exception) as e:
+        plugin_eval(bsdf, si, outgoing(1)[0])
+    msg = str(e.value)
+    assert 'texture coordinates' in msg and 'anisotropic' in msg, msg
+    assert 'tracks = "linear"' not in msg, msg

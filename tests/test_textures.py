@@ -200,13 +200,14 @@ def test_sigma_map_samples_follow_the_points_sigma(variant):
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 def test_sigma_map_bad_values_give_finite_results(variant):
-    """Negative, zero and NaN values read as the smoothest sigma (1e-6 um);
-    values above the given sigma_um_max as that maximum."""
+    """Negative and zero values read as the smoothest sigma (1e-6 um);
+    values above the given sigma_um_max as that maximum (NaN is refused:
+    test_nan_texels_are_refused_naming_the_parameter)."""
     mi = stam_mitsuba.setup(variant)
     base = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0, 'fresnel': 0.9,
             'energy': 'stam'}
     bad = mi.load_dict({**base, 'sigma_um_max': 0.2,
-                        'sigma_um': sigma_map(mi, [[-0.3, 0.0], [float('nan'), 0.9]])})
+                        'sigma_um': sigma_map(mi, [[-0.3, 0.0], [-1e-3, 0.9]])})
     for uv in ((0.25, 0.25), (0.75, 0.25), (0.25, 0.75)):
         got = eval_at(mi, bad, uv)
         assert np.all(np.isfinite(got)) and np.all(got >= 0), (uv, got)
@@ -254,14 +255,14 @@ def test_sine_height_map_gives_each_point_its_height(variant):
 
 @pytest.mark.parametrize('variant', ['llvm_ad_rgb', 'llvm_ad_spectral'])
 def test_sine_height_map_bad_values_give_finite_results(variant):
-    """A sine grating's height map: negative, zero and NaN values read as a
-    flat surface (height 0, a mirror's order 0 only); values above the given
-    height_um_max as that maximum."""
+    """A sine grating's height map: negative and zero values read as a flat
+    surface (height 0, a mirror's order 0 only); values above the given
+    height_um_max as that maximum (NaN is refused)."""
     mi = stam_mitsuba.setup(variant)
     base = {'type': 'diffraction', 'surface': 'periodic', 'period_um': 1.2, 'profile': 'sine',
             'coherence_um': 6.0, 'fresnel': 0.9, 'energy': 'stam'}
     bad = mi.load_dict({**base, 'height_um_max': 0.3,
-                        'height_um': sigma_map(mi, [[-0.3, 0.0], [float('nan'), 0.9]])})
+                        'height_um': sigma_map(mi, [[-0.3, 0.0], [-1e-3, 0.9]])})
     wo = (-0.76, -0.2)   # on the first order's peak
     for uv in ((0.25, 0.25), (0.75, 0.25), (0.25, 0.75)):
         got = eval_at(mi, bad, uv, wo=wo)
@@ -270,6 +271,36 @@ def test_sine_height_map_bad_values_give_finite_results(variant):
     capped = mi.load_dict({**base, 'height_um': 0.3})
     assert np.allclose(eval_at(mi, bad, (0.75, 0.75), wo=wo),
                        eval_at(mi, capped, (0.75, 0.75), wo=wo), rtol=2e-3)
+
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'llvm_ad_rgb'])
+def test_nan_texels_are_refused_naming_the_parameter(variant):
+    """A map holding NaN (everywhere, or at one texel) is refused with a
+    message naming its parameter, not read as some number (an all-NaN
+    sigma map once reported 'largest value is 0.000000'): sigma and height
+    maps (JIT variants), twist maps (every variant; also infinite angles)."""
+    mi = stam_mitsuba.setup(variant)
+    nan, inf = float('nan'), float('inf')
+
+    def refused(params, key, what):
+        with pytest.raises(Exception) as e:
+            mi.load_dict(params)
+        msg = str(e.value)
+        assert "parameter '%s'" % key in msg and what in msg, msg
+        assert 'largest value' not in msg, msg
+
+    maps = ([[nan, nan], [nan, nan]], [[0.1, nan], [0.2, 0.3]])
+    if not variant.startswith('scalar'):
+        gaussian = {'type': 'diffraction', 'surface': 'gaussian', 'corr_um': 2.0}
+        disc = {'type': 'diffraction', 'surface': 'cd'}
+        for values in maps:
+            refused({**gaussian, 'sigma_um': sigma_map(mi, values)}, 'sigma_um', 'NaN')
+            refused({**disc, 'height_um': sigma_map(mi, values)}, 'height_um', 'NaN')
+    for values in maps + ([[10.0, inf], [0.0, 0.0]],):
+        refused({**BRUSHED, 'twist': sigma_map(mi, values)}, 'twist',
+                'NaN' if np.isnan(values).any() else 'infinite')
+    # Numbers everywhere are taken
+    mi.load_dict({**BRUSHED, 'twist': sigma_map(mi, [[10.0, -400.0], [0.0, 1e6]])})
 
 
 def test_height_map_is_refused_where_it_cannot_go():

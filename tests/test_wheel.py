@@ -6,7 +6,10 @@ virtualenv outside the repository gets only the pinned mitsuba, drjit and numpy
 the repository it then loads and renders a small scene with the BSDF in
 scalar_rgb and llvm_ad_rgb (the package imported before and after
 mi.set_variant), and with the `mitsuba` command. A plugin recorded as compiled
-against another mitsuba gives the clear error, not a crash.
+against another mitsuba gives the clear error, not a crash. The wheel
+describes itself: README.md as its long description, the LICENSE file,
+`python -m stam_diffraction --help` listing every surface's parameters with
+the core's units, ranges and defaults; no stale advice (-W -W) anywhere.
 """
 
 import json
@@ -206,9 +209,9 @@ def test_mitsuba_command(venv, variant):
                      env=env).stdout.strip()
     assert plugin_dir.startswith(os.path.dirname(os.path.dirname(python)))
     out = os.path.join(work, variant + '.exr')
+    # Dr.Jit's default flags (symbolic loops and calls) in every variant
     cmd = ['mitsuba', '-m', variant, '-a', plugin_dir, '-o', out, 'scene.xml']
     if variant.startswith('llvm'):
-        cmd[1:1] = ['-W', '-W']     # Dr.Jit's symbolic loops and calls off
         env = dict(env, DRJIT_LIBLLVM_PATH=stam_diffraction.find_libllvm())
     run(cmd, cwd=work, env=env)
     check = ('import mitsuba as mi, numpy as np; mi.set_variant("scalar_rgb"); '
@@ -244,6 +247,89 @@ def test_other_mitsuba_version_is_a_clear_error(venv):
     finally:
         os.replace(saved, record)
     run([python, '-c', 'import stam_diffraction'], cwd=work, env=env)
+
+
+def test_the_wheel_describes_itself(wheel):
+    """The metadata's long description is README.md (markdown), the license
+    is MIT with the LICENSE file in the wheel, and it claims no address the
+    project does not have."""
+    with zipfile.ZipFile(wheel) as z:
+        info = [n for n in z.namelist() if '.dist-info/' in n]
+        metadata = z.read([n for n in info if n.endswith('/METADATA')][0]).decode()
+        licenses = [n for n in info if n.endswith('/licenses/LICENSE')]
+        assert licenses, info
+        license_text = z.read(licenses[0]).decode()
+    head, _, body = metadata.partition('\n\n')
+    assert 'Description-Content-Type: text/markdown' in head, head
+    assert 'License-Expression: MIT' in head and 'License-File: LICENSE' in head, head
+    assert 'Project-URL' not in head, head     # no public address yet
+    with open(os.path.join(ROOT, 'README.md')) as f:
+        readme = f.read()
+    assert body.strip() == readme.strip()
+    with open(os.path.join(ROOT, 'LICENSE')) as f:
+        assert f.read() == license_text
+    assert license_text.startswith('MIT License')
+    assert 'Copyright (c) 2026 the stam-diffraction authors' in license_text
+
+
+def test_help_lists_every_parameter_from_the_core():
+    """`python -m stam_diffraction --help` lists every key of every surface
+    of the core's parameter reference (stam_parameter_reference) with its
+    unit, accepted range and default, and the plugin's own keys."""
+    from stam_diffraction import __main__ as cli, core
+    text = cli.parameter_help()
+    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, 'python'))
+    out = run([sys.executable, '-m', 'stam_diffraction', '--help'], env=env).stdout
+    assert ' '.join(text.split()) in ' '.join(out.split())
+    ref = core.parameter_reference()
+    sections = [('Every surface:', ref['material'])] + \
+        [('surface "%s":' % s['surface'], s['keys']) for s in ref['surfaces']]
+    flat = ' '.join(text.split())
+    for i, (title, keys) in enumerate(sections):
+        start = flat.index(title)
+        end = flat.index(sections[i + 1][0]) if i + 1 < len(sections) else len(flat)
+        part = flat[start:end]
+        for d in keys:
+            unit = ' (%s)' % d['unit'] if d['unit'] else ''
+            entry = part.index('%s%s: %s' % (d['key'], unit, ' '.join(d['meaning'].split())))
+            facts = part[entry:]
+            assert facts.index('accepted ' + ' '.join(d['accepted'].split())) < 400, d
+            if d['required']:
+                assert '; required' in facts[:400], d
+            elif d['default'] is not None:
+                assert 'default ' + cli._value(d['default']) in facts[:500], d
+    for key in ('twist (degrees)', 'tracks:', 'center_u, center_v', 'eta, k'):
+        assert key in flat, key
+    # The compact disc's defaults, as a user would look for them
+    cd = flat[flat.index('surface "cd":'):]
+    for words in ('period_um (um): grating period (track pitch) accepted [0.05, 1000]; '
+                  'default 2.5', 'default 50', 'default 0.15', 'default 0.5', 'default "rect"'):
+        assert words in cd, words
+
+
+def test_no_stale_flag_advice():
+    """The default Dr.Jit flags work (and are faster): nothing advises -W -W
+    (symbolic loops and calls off) any more."""
+    env = dict(os.environ, PYTHONPATH=os.path.join(ROOT, 'python'))
+    out = run([sys.executable, '-m', 'stam_diffraction'], env=env).stdout
+    assert '-W' not in out and '--help' in out, out
+    places = [os.path.join(ROOT, 'README.md')]
+    for folder, ext in (('docs', '.md'), ('python/stam_diffraction', '.py'),
+                        ('mitsuba-plugin', ''), ('scripts', '.py')):
+        for name in os.listdir(os.path.join(ROOT, folder)):
+            if name.endswith(ext) and os.path.isfile(os.path.join(ROOT, folder, name)):
+                places.append(os.path.join(ROOT, folder, name))
+    for path in places:
+        with open(path, errors='replace') as f:
+            text = f.read()
+        assert not re.search(r'-W -W|add `?-W|`-W` given twice', text), path
+
+
+def test_installed_package_lists_the_parameters(venv):
+    """The installed wheel alone reaches the parameter reference."""
+    python, work, env = venv
+    out = run([python, '-m', 'stam_diffraction', '--help'], cwd=work, env=env).stdout
+    assert 'surface "cd":' in out and 'period_um (um)' in out and 'default 2.5' in out, out
 
 
 def test_version_check_in_process():

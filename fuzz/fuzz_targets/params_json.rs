@@ -147,6 +147,18 @@ fuzz_target!(|data: &[u8]| {
         assert!(!warnings.is_null() && std::ffi::CStr::from_ptr(warnings).to_str().is_ok());
         let version = stam_version();
         assert!(!version.is_null() && !std::ffi::CStr::from_ptr(version).to_bytes().is_empty());
+        // The resolved parameters read back as the same material's
+        let resolved = stam_brdf_params_json(p);
+        assert!(!resolved.is_null());
+        let resolved = std::ffi::CStr::from_ptr(resolved).to_str().expect("params_json UTF-8");
+        let given = std::str::from_utf8(text).expect("an accepted text is UTF-8");
+        assert!(
+            stam::params::MaterialParams::from_json(resolved).ok()
+                == stam::params::MaterialParams::from_json(given).ok(),
+            "params_json {resolved} does not read back as {given}"
+        );
+        let reference = stam_parameter_reference();
+        assert!(!reference.is_null() && std::ffi::CStr::from_ptr(reference).to_str().is_ok());
         stam_brdf_free(p);
     }
 });

@@ -18,8 +18,10 @@ periodic direction of gratings), so wi, wo have shape (..., 3); wavelengths
 shape (plus 3 for RGB). Inputs go to the core as float32 (the ABI's type);
 results come back as float64 arrays holding those float32 values.
 
-Methods follow the header's functions one to one (stam_brdf_<method>); see
-stam.h for the exact contract of each.
+Methods follow the header's functions one to one (stam_brdf_<method>;
+resolved_params is stam_brdf_params_json); see stam.h for the exact contract
+of each. parameter_reference() is the reference of every surface's keys
+(stam_parameter_reference: units, ranges, defaults).
 
 Programs (stam_brdf_export_program): what a renderer that traces its code
 (Dr.Jit) executes; Brdf.export_program(kind) hands one out as a float32 array
@@ -187,6 +189,8 @@ def lib():
         'stam_brdf_memory_bytes': (sz, [vp]),
         'stam_brdf_export_program': (sz, [vp, ctypes.c_uint32, fp, sz]),
         'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
+        'stam_brdf_params_json': (ctypes.c_char_p, [vp]),
+        'stam_parameter_reference': (ctypes.c_char_p, []),
         'stam_version': (ctypes.c_char_p, []),
     }
     for name, (res, args) in sig.items():
@@ -200,6 +204,17 @@ def lib():
 def version():
     """The core's version string (stam_version)."""
     return lib().stam_version().decode()
+
+
+def parameter_reference():
+    """The parameter reference (stam_parameter_reference): a dict with
+    'material' (the keys every surface reads) and 'surfaces' (a list of
+    {'surface': name, 'keys': [...]}), each key a dict of 'key', 'meaning',
+    'unit' ('um' or ''), 'min', 'max' (None where none or relative to
+    another key), 'min_open', 'integer', 'accepted' (in words), 'required',
+    'default' (None: none) and 'note', from the ranges the core's parameter
+    readers check (docs/parameters.md)."""
+    return json.loads(lib().stam_parameter_reference().decode())
 
 
 def _f32(a):
@@ -290,6 +305,14 @@ class Brdf:
             raise RuntimeError('stam_diffraction.core: export_program wrote %d of %d'
                                % (written, n))
         return out
+
+    def resolved_params(self):
+        """Every parameter the material reads with the value it took,
+        defaults filled in (stam_brdf_params_json), as a dict: e.g. the
+        compact disc's period_um, coherence_um, height_um and width_um, the
+        default fresnel 'aluminium'. Brdf(b.resolved_params()) is the same
+        material."""
+        return json.loads(self._lib.stam_brdf_params_json(self._handle()).decode())
 
     def warnings(self):
         """The plausibility warnings of the parameters (stam_brdf_warnings):

@@ -194,6 +194,25 @@ size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
  * The string is owned by the material and lives until stam_brdf_free. */
 const char *stam_brdf_warnings(const StamBrdf *b);
 
+/* The material's parameters as a JSON object: every key it reads with the
+ * value it took, defaults filled in (e.g. {"surface": "cd"} gives its
+ * period_um, coherence_um, profile, height_um, width_um, fresnel, energy
+ * and gradients); stam_brdf_new of this text builds the same material. A
+ * key given in one of two forms keeps its form (corr_um, or corr_x_um and
+ * corr_y_um). "" when b is NULL. The string is owned by the material and
+ * lives until stam_brdf_free. */
+const char *stam_brdf_params_json(const StamBrdf *b);
+
+/* The parameter reference (docs/parameters.md) as a JSON object, from the
+ * range constants the parameter readers check: {"version", "units",
+ * "material": [key...], "surfaces": [{"surface": name, "keys": [key...]}]},
+ * each key {"key", "meaning", "unit" ("um" or ""), "min", "max" (numbers,
+ * null where none or relative to another key), "min_open", "integer",
+ * "accepted" (in words), "required", "default" (null: none), "note"}; the
+ * material's keys apply to every surface ("fresnel.eta": a key of the
+ * object form of fresnel). Static storage. */
+const char *stam_parameter_reference(void);
+
 /* Bytes of memory the material holds (tables included; a Gaussian surface's
    RGB table once the first RGB evaluation has built it). */
 size_t stam_brdf_memory_bytes(const StamBrdf *b);

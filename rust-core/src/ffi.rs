@@ -5,12 +5,14 @@
 //! into C. On a caught panic, outputs are zeroed (and construction reports
 //! the panic message).
 
+use crate::material::params::{parameter_reference, resolved_json_text};
 use crate::material::plausibility::warnings_for_json;
 use crate::material::Brdf;
 use crate::material::Channels;
 use glam::DVec3;
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::OnceLock;
 
 /// Opaque handle handed to C.
 pub struct StamBrdf {
@@ -18,6 +20,9 @@ pub struct StamBrdf {
     /// The plausibility warnings of its parameters, one per line
     /// (`stam_brdf_warnings`).
     pub warnings: CString,
+    /// Its parameters with the defaults filled in, as JSON
+    /// (`stam_brdf_params_json`).
+    pub params_json: CString,
 }
 
 /// f64 -> f32 for outputs: finite, non-negative, clamped to f32::MAX.
@@ -84,7 +89,13 @@ pub unsafe extern "C" fn stam_brdf_new(
         Ok(Ok(brdf)) => {
             write_message(err, err_len, "");
             let warnings = catch_unwind(|| warnings_text(text)).unwrap_or_default();
-            Box::into_raw(Box::new(StamBrdf { brdf, warnings }))
+            let params_json = catch_unwind(|| c_text(resolved_json_text(text).unwrap_or_default()))
+                .unwrap_or_default();
+            Box::into_raw(Box::new(StamBrdf {
+                brdf,
+                warnings,
+                params_json,
+            }))
         }
         Ok(Err(e)) => {
             write_message(err, err_len, &e.message);
@@ -104,6 +115,12 @@ fn warnings_text(text: &str) -> CString {
         .map(|w| w.message.replace(['\n', '\0'], " "))
         .collect();
     CString::new(lines.join("\n")).unwrap_or_default()
+}
+
+/// Text as a C string (a NUL byte, which JSON text escapes, would end it:
+/// "" then).
+fn c_text(text: String) -> CString {
+    CString::new(text).unwrap_or_default()
 }
 
 /// # Safety
@@ -607,6 +624,26 @@ pub unsafe extern "C" fn stam_brdf_warnings(b: *const StamBrdf) -> *const c_char
         return c"".as_ptr();
     }
     (*b).warnings.as_ptr()
+}
+
+/// # Safety
+/// `b` NULL or valid. The string lives as long as the material.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_params_json(b: *const StamBrdf) -> *const c_char {
+    if b.is_null() {
+        return c"".as_ptr();
+    }
+    (*b).params_json.as_ptr()
+}
+
+#[no_mangle]
+pub extern "C" fn stam_parameter_reference() -> *const c_char {
+    static REFERENCE: OnceLock<CString> = OnceLock::new();
+    REFERENCE
+        .get_or_init(|| {
+            catch_unwind(|| c_text(parameter_reference().to_string())).unwrap_or_default()
+        })
+        .as_ptr()
 }
 
 #[no_mangle]

@@ -27,6 +27,7 @@
 //!   and reflect into each other, which the model leaves out).
 
 use super::params::MaterialParams;
+use crate::json::{nanometre_hint, show};
 use crate::models::fractal::FractalParams;
 use crate::models::gaussian::GaussianParams;
 use crate::models::periodic::{PeriodicParams, Profile};
@@ -89,20 +90,6 @@ pub fn warnings_for_json(text: &str) -> Vec<Warning> {
         .unwrap_or_default()
 }
 
-/// A value as a person would write it (4 significant digits).
-fn show(x: f64) -> String {
-    let short = format!("{x:.3e}").parse::<f64>().unwrap_or(x);
-    format!("{short}")
-}
-
-/// The hint for a length that may have been meant in nanometres.
-fn nm_hint(key: &str, x: f64) -> String {
-    format!(
-        " If {key} was meant in nanometres, it is {key} = {} (micrometres).",
-        show(x / 1000.0)
-    )
-}
-
 fn gaussian(p: &GaussianParams, out: &mut Vec<Warning>) {
     let sigma = p.sigma_um;
     let t_long = p.corr_x_um.max(p.corr_y_um);
@@ -135,7 +122,7 @@ fn gaussian(p: &GaussianParams, out: &mut Vec<Warning>) {
                 show(g_red),
                 show(grazing_deg),
                 show(2.0 * sigma / t_short),
-                nm_hint("sigma_um", sigma)
+                nanometre_hint("sigma_um", sigma)
             ),
         );
     } else if g_blue < MIRROR_G {
@@ -164,7 +151,7 @@ fn gaussian(p: &GaussianParams, out: &mut Vec<Warning>) {
                 "parameter '{corr_key}' = {} um makes the diffuse lobe {} mrad wide at 550 nm, narrower than any real light source: the surface renders as a mirror and its lobe is hard to sample. Visible diffraction colours need a correlation length of a few micrometres (e.g. corr_um 1 with sigma_um 0.03).{}",
                 show(t_long),
                 show(narrow * 1000.0),
-                nm_hint(corr_key, t_long)
+                nanometre_hint(corr_key, t_long)
             ),
         );
     }
@@ -198,7 +185,7 @@ fn fractal(p: &FractalParams, out: &mut Vec<Warning>) {
                 show(p.lag_um),
                 show(p.hurst),
                 show(width),
-                nm_hint("sigma_um", p.sigma_um)
+                nanometre_hint("sigma_um", p.sigma_um)
             ),
         );
     } else if width < NARROW_LOBE {
@@ -236,7 +223,7 @@ fn periodic(p: &PeriodicParams, out: &mut Vec<Warning>) {
                 "parameter 'period_um' = {} um spreads the first order's rainbow over only {} mrad (0.3 um / period), less than a small lamp subtends: the colours wash out. Compact discs have 1.6 um, DVDs 0.74 um, Blu-ray discs 0.32 um.{}",
                 show(period),
                 show(300.0 / period),
-                nm_hint("period_um", period)
+                nanometre_hint("period_um", period)
             ),
         );
     }

@@ -19,7 +19,7 @@ pub use program::{FactorMaker, FactorProgram, SampleProgram, SurfacePrograms};
 pub use rgb_rule::{RgbRule, MAX_RGB_NODES};
 
 use crate::error::StamError;
-use crate::json::{type_name, Reader};
+use crate::json::{type_name, KeyDoc, Reader};
 use crate::optics::fresnel::{Fresnel, FresnelAtCos};
 use crate::optics::geometry::{normalize_direction, PairGeometry, MIN_COS};
 use crate::program::ParamId;
@@ -135,6 +135,18 @@ pub trait ModelParams: Sized {
 
     /// A copy with the parameter `id` (one of `table_params`) at `value`.
     fn with_param(&self, id: ParamId, value: f64) -> Self;
+
+    /// The keys that the surface named `surface` (one of SURFACE_NAMES)
+    /// reads, with units, ranges and defaults, for the parameter reference
+    /// (`stam_parameter_reference`): made from the range constants `parse`
+    /// checks.
+    fn reference(surface: &str) -> Vec<KeyDoc>;
+
+    /// Every key the surface reads, with the value it took (defaults
+    /// filled in), into `out` (`stam_brdf_params_json`): `parse` of them
+    /// gives these parameters. `given`: the keys as given, for the form
+    /// where two are accepted (corr_um, or corr_x_um and corr_y_um).
+    fn resolved(&self, given: &Map<String, Value>, out: &mut Map<String, Value>);
 }
 
 /// What each surface model provides to the material.
@@ -296,12 +308,25 @@ macro_rules! surface_models {
 
         impl SurfaceParams {
             /// Every value of the key 'surface', in the models' order.
-            fn surface_names() -> Vec<&'static str> {
+            pub fn surface_names() -> Vec<&'static str> {
                 let mut names = Vec::new();
                 $(names.extend_from_slice(
                     <<$module::$model as SurfaceModel>::Params as ModelParams>::SURFACE_NAMES,
                 );)+
                 names
+            }
+
+            /// The keys of each value of 'surface', in the models' order
+            /// (`ModelParams::reference`).
+            pub fn reference() -> Vec<(&'static str, Vec<KeyDoc>)> {
+                let mut out = Vec::new();
+                $({
+                    type P = <$module::$model as SurfaceModel>::Params;
+                    for &name in <P as ModelParams>::SURFACE_NAMES {
+                        out.push((name, <P as ModelParams>::reference(name)));
+                    }
+                })+
+                out
             }
 
             /// The parameters of the model that `surface` names.
@@ -458,6 +483,11 @@ impl SurfaceParams {
     /// model integrates its spectrum itself).
     pub fn rgb_nodes(&self) -> usize {
         dispatch!(self, SurfaceParams, p => p.rgb_nodes())
+    }
+
+    /// `ModelParams::resolved`.
+    pub fn resolved(&self, given: &Map<String, Value>, out: &mut Map<String, Value>) {
+        dispatch!(self, SurfaceParams, p => p.resolved(given, out))
     }
 
     /// `ModelParams::table_params`.

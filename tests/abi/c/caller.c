@@ -304,6 +304,39 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     CHECK(40, stam_brdf_warnings(NULL) != NULL && stam_brdf_warnings(NULL)[0] == '\0',
           "NULL material's warnings");
 
+    /* The resolved parameters: a JSON object that builds the same material
+     * (the same values, the same resolved text); the disc's defaults
+     * filled in; "" for NULL. */
+    {
+        const char *resolved = stam_brdf_params_json(b);
+        CHECK(48, resolved != NULL && resolved[0] == '{', "params_json: %s",
+              resolved ? resolved : "(NULL)");
+        StamBrdf *again = stam_brdf_new(resolved, err, sizeof err);
+        CHECK(49, again != NULL, "params_json does not build: %s", err);
+        CHECK(50, strcmp(stam_brdf_params_json(again), resolved) == 0,
+              "params_json of params_json differs: %s", stam_brdf_params_json(again));
+        float rgb2[3 * N];
+        stam_brdf_eval_rgb(b, N, wi, wo, rgb);
+        stam_brdf_eval_rgb(again, N, wi, wo, rgb2);
+        stam_brdf_free(again);
+        CHECK(51, memcmp(rgb, rgb2, sizeof rgb) == 0, "params_json builds another material");
+        w = stam_brdf_new("{\"surface\":\"cd\"}", err, sizeof err);
+        CHECK(52, w != NULL && strstr(stam_brdf_params_json(w), "\"period_um\":2.5") != NULL &&
+                      strstr(stam_brdf_params_json(w), "\"fresnel\":\"aluminium\"") != NULL,
+              "the disc's defaults in params_json: %s", w ? stam_brdf_params_json(w) : "(refused)");
+        stam_brdf_free(w);
+        CHECK(53, stam_brdf_params_json(NULL) != NULL && stam_brdf_params_json(NULL)[0] == '\0',
+              "NULL material's params_json");
+    }
+
+    /* The parameter reference: static JSON naming every surface's keys. */
+    {
+        const char *ref = stam_parameter_reference();
+        CHECK(54, ref != NULL && ref[0] == '{' && strstr(ref, "\"surfaces\"") != NULL &&
+                      strstr(ref, "\"coherence_um\"") != NULL && ref == stam_parameter_reference(),
+              "parameter reference");
+    }
+
     /* NULL material: zeros, no crash. */
     stam_brdf_eval_spectral(NULL, N, wi, wo, lambda, out);
     CHECK(21, out[0] == 0.0f, "NULL material must give 0");

@@ -192,6 +192,14 @@ mod tests {
             ffi::stam_brdf_warnings as unsafe extern "C" fn(_) -> _,
         );
         same_signature(
+            h::stam_brdf_params_json as unsafe extern "C" fn(_) -> _,
+            ffi::stam_brdf_params_json as unsafe extern "C" fn(_) -> _,
+        );
+        same_signature(
+            h::stam_parameter_reference as unsafe extern "C" fn() -> _,
+            ffi::stam_parameter_reference as unsafe extern "C" fn() -> _,
+        );
+        same_signature(
             h::stam_version as unsafe extern "C" fn() -> _,
             ffi::stam_version as unsafe extern "C" fn() -> _,
         );

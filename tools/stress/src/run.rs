@@ -19,13 +19,16 @@
 //!   with the
 //!   core's f32 executor under the contract of `crate::programs`;
 //! - every refused material has a non-empty message; the version string is
-//!   non-empty UTF-8; the plausibility warnings are UTF-8 and the Rust API's.
+//!   non-empty UTF-8; the plausibility warnings are UTF-8 and the Rust API's;
+//!   the resolved parameters (stam_brdf_params_json) read back as the same
+//!   material's, and the parameter reference is JSON.
 
 use crate::gen::{self, Rng};
 use crate::programs;
 use glam::DVec3;
 use stam::ffi;
 use stam::material::plausibility::warnings_for_json;
+use stam::params::MaterialParams;
 use std::ffi::{c_char, CString};
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -91,6 +94,10 @@ pub struct Report {
     /// stam_brdf_warnings returned NULL, text that is not UTF-8, or text
     /// other than the Rust API's warnings of the same parameters.
     pub bad_warnings: u64,
+    /// stam_brdf_params_json returned NULL, text that is not UTF-8, or
+    /// parameters that do not read back as the material's; or
+    /// stam_parameter_reference is not the reference's JSON.
+    pub bad_params_json: u64,
     /// Programs exported (materials times kinds).
     pub programs: u64,
     /// Lanes the programs were run on (one program, one lane).
@@ -119,6 +126,7 @@ impl Report {
             + self.bad_coherent_probability
             + self.bad_version
             + self.bad_warnings
+            + self.bad_params_json
             + self.bad_programs
             + self.refused_without_message
     }
@@ -297,6 +305,17 @@ pub fn run(options: &Options) -> Report {
     if !version_ok {
         report.bad_version += 1;
         report.fail("stam_version: NULL, empty or not UTF-8".to_string());
+    }
+    let reference = ffi::stam_parameter_reference();
+    let reference_ok = !reference.is_null()
+        && unsafe { std::ffi::CStr::from_ptr(reference) }
+            .to_str()
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(t).ok())
+            .is_some_and(|v| v["surfaces"].is_array() && v["material"].is_array());
+    if !reference_ok {
+        report.bad_params_json += 1;
+        report.fail("stam_parameter_reference: NULL, not UTF-8 or not its JSON".to_string());
     }
     let mut rng = Rng::new(options.seed);
     let mut kind = 0usize;
@@ -717,6 +736,20 @@ pub fn run(options: &Options) -> Report {
             let _ = ffi::stam_brdf_memory_bytes(b);
         }
         check_programs(&mut report, b, brdf, &json, &lanes);
+        // The resolved parameters: UTF-8, read back as the same material's.
+        let resolved = unsafe { ffi::stam_brdf_params_json(b) };
+        let resolved = (!resolved.is_null())
+            .then(|| unsafe { std::ffi::CStr::from_ptr(resolved) }.to_str().ok())
+            .flatten();
+        let same = resolved.is_some_and(|r| {
+            MaterialParams::from_json(r).ok() == MaterialParams::from_json(&json).ok()
+        });
+        if !same {
+            report.bad_params_json += 1;
+            report.fail(format!(
+                "stam_brdf_params_json: {resolved:?} does not read back as {json}"
+            ));
+        }
         // The warnings: UTF-8, the Rust API's, one per line.
         let warnings = unsafe { ffi::stam_brdf_warnings(b) };
         let expected: Vec<String> = warnings_for_json(&json)

@@ -84,6 +84,21 @@ fn exercise(text: &str, floats: &[f32]) -> Result<(), String> {
         return Ok(());
     }
     ACCEPTED.fetch_add(1, Ordering::Relaxed);
+    // The resolved parameters read back as the same material's
+    let resolved = unsafe { stam::ffi::stam_brdf_params_json(p) };
+    let resolved = (!resolved.is_null())
+        .then(|| unsafe { std::ffi::CStr::from_ptr(resolved) }.to_str().ok())
+        .flatten();
+    let same = resolved.is_some_and(|r| {
+        stam::params::MaterialParams::from_json(r).ok()
+            == stam::params::MaterialParams::from_json(text).ok()
+    });
+    if !same {
+        unsafe { stam::ffi::stam_brdf_free(p) };
+        return Err(format!(
+            "stam_brdf_params_json {resolved:?} does not read back as {text}"
+        ));
+    }
     let r = call_everything(p, floats);
     unsafe { stam::ffi::stam_brdf_free(p) };
     r.map_err(|e| format!("{text}: {e}"))
@@ -293,6 +308,14 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
         let version = stam_version();
         if version.is_null() || std::ffi::CStr::from_ptr(version).to_bytes().is_empty() {
             return Err("stam_version is NULL or empty".to_string());
+        }
+        let reference = stam_parameter_reference();
+        let parsed = (!reference.is_null())
+            .then(|| std::ffi::CStr::from_ptr(reference).to_str().ok())
+            .flatten()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(t).ok());
+        if !parsed.is_some_and(|v| v["surfaces"].is_array()) {
+            return Err("stam_parameter_reference is not the reference's JSON".to_string());
         }
     }
     Ok(())

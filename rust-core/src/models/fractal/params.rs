@@ -1,8 +1,9 @@
 //! Parameters of a fractal surface (docs/parameters.md).
 
 use crate::error::StamError;
-use crate::json::Reader;
+use crate::json::{KeyDoc, Reader};
 use crate::program::ParamId;
+use serde_json::{json, Map, Value};
 
 /// Accepted ranges, shared by the validator, the docs and the stress tests.
 pub mod range {
@@ -52,6 +53,48 @@ impl crate::models::ModelParams for FractalParams {
             _ => {}
         }
         p
+    }
+
+    fn reference(_surface: &str) -> Vec<KeyDoc> {
+        vec![
+            KeyDoc::number(
+                "hurst",
+                "Hurst exponent H (fractal dimension 3 - H)",
+                "",
+                range::HURST,
+                false,
+            )
+            .required(),
+            KeyDoc::number(
+                "sigma_um",
+                "rms height difference over lag_um",
+                "um",
+                range::SIGMA_UM,
+                false,
+            )
+            .required(),
+            KeyDoc::number(
+                "lag_um",
+                "lag at which the rms height difference is sigma_um",
+                "um",
+                range::LAG_UM,
+                false,
+            )
+            .required(),
+            KeyDoc::integer(
+                "rgb_nodes",
+                "wavelength nodes of the RGB rule",
+                range::RGB_NODES,
+            )
+            .default(json!(DEFAULT_RGB_NODES)),
+        ]
+    }
+
+    fn resolved(&self, _given: &Map<String, Value>, out: &mut Map<String, Value>) {
+        out.insert("hurst".into(), json!(self.hurst));
+        out.insert("sigma_um".into(), json!(self.sigma_um));
+        out.insert("lag_um".into(), json!(self.lag_um));
+        out.insert("rgb_nodes".into(), json!(self.rgb_nodes));
     }
 
     fn parse(_surface: &str, r: &Reader) -> Result<FractalParams, StamError> {

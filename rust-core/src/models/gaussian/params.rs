@@ -2,9 +2,10 @@
 
 use super::series::DEFAULT_SERIES_TOLERANCE;
 use crate::error::StamError;
-use crate::json::{format_bound, Reader};
+use crate::json::{format_bound, KeyDoc, Reader};
 use crate::models::MAX_RGB_NODES;
 use crate::program::ParamId;
+use serde_json::{json, Map, Value};
 
 /// Accepted ranges, shared by the validator, the docs and the stress tests.
 pub mod range {
@@ -67,6 +68,76 @@ impl crate::models::ModelParams for GaussianParams {
             _ => {}
         }
         p
+    }
+
+    fn reference(_surface: &str) -> Vec<KeyDoc> {
+        let corr = "give 'corr_um' (isotropic), or both 'corr_x_um' and 'corr_y_um' (anisotropic)";
+        vec![
+            KeyDoc::number("sigma_um", "rms height", "um", range::SIGMA_UM, false).required(),
+            KeyDoc::number(
+                "corr_um",
+                "correlation length T (isotropic)",
+                "um",
+                range::CORR_UM,
+                false,
+            )
+            .note(corr),
+            KeyDoc::number(
+                "corr_x_um",
+                "correlation length along the tangent (x: the tracks' direction; anisotropic, brushed metal)",
+                "um",
+                range::CORR_UM,
+                false,
+            )
+            .note(corr),
+            KeyDoc::number(
+                "corr_y_um",
+                "correlation length along the bitangent (y; anisotropic)",
+                "um",
+                range::CORR_UM,
+                false,
+            )
+            .note(corr),
+            KeyDoc::number(
+                "series_tolerance",
+                "relative truncation tolerance of the Poisson series",
+                "",
+                range::SERIES_TOLERANCE,
+                false,
+            )
+            .default(json!(DEFAULT_SERIES_TOLERANCE)),
+            KeyDoc::integer(
+                "rgb_nodes",
+                "wavelength nodes of the RGB rule",
+                range::RGB_NODES,
+            )
+            .default(json!(DEFAULT_RGB_NODES)),
+            KeyDoc::number(
+                "sigma_um_max",
+                "the largest value of a sigma texture: the programs serve every sigma up to it",
+                "um",
+                range::SIGMA_UM,
+                false,
+            )
+            .note("at least sigma_um; the plugin sets it from a sigma_um texture"),
+        ]
+    }
+
+    fn resolved(&self, given: &Map<String, Value>, out: &mut Map<String, Value>) {
+        out.insert("sigma_um".into(), json!(self.sigma_um));
+        // Equal corr_x_um and corr_y_um are an isotropic surface given in
+        // the anisotropic form: kept in the form given.
+        if self.anisotropic || given.contains_key("corr_x_um") || given.contains_key("corr_y_um") {
+            out.insert("corr_x_um".into(), json!(self.corr_x_um));
+            out.insert("corr_y_um".into(), json!(self.corr_y_um));
+        } else {
+            out.insert("corr_um".into(), json!(self.corr_x_um));
+        }
+        out.insert("series_tolerance".into(), json!(self.series_tolerance));
+        out.insert("rgb_nodes".into(), json!(self.rgb_nodes));
+        if let Some(max) = self.sigma_um_max {
+            out.insert("sigma_um_max".into(), json!(max));
+        }
     }
 
     fn parse(_surface: &str, r: &Reader) -> Result<GaussianParams, StamError> {

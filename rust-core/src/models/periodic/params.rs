@@ -3,9 +3,9 @@
 
 use super::Profile;
 use crate::error::StamError;
-use crate::json::{format_bound, type_name, Reader};
+use crate::json::{doc_number, format_bound, nanometre_hint_above, type_name, KeyDoc, Reader};
 use crate::program::ParamId;
-use serde_json::Value;
+use serde_json::{json, Map, Value};
 
 /// The compact disc of the paper (Stam's "Used physical dimensions").
 pub const CD_PERIOD_UM: f64 = 2.5;
@@ -73,6 +73,108 @@ impl crate::models::ModelParams for PeriodicParams {
         out
     }
 
+    /// "cd" gives the disc's defaults; "periodic" requires the keys.
+    fn reference(surface: &str) -> Vec<KeyDoc> {
+        let cd = surface == "cd";
+        let default = |v: Value| cd.then_some(v);
+        let coherence = KeyDoc::number(
+            "coherence_um",
+            "Gaussian coherence length of the illumination",
+            "um",
+            (range::COHERENCE_MIN_PERIODS, range::COHERENCE_MAX_UM),
+            false,
+        )
+        .min_relative(format!(
+            "[{} period_um, {}]",
+            range::COHERENCE_MIN_PERIODS,
+            doc_number(range::COHERENCE_MAX_UM)
+        ))
+        .default_or_required(default(json!(CD_COHERENCE_UM)));
+        let width = KeyDoc::number("width_um", "bump width per period", "um", (0.0, 0.0), true)
+            .max_relative("(0, period_um]".into())
+            .default_or_required(default(json!(CD_BUMP_WIDTH_UM)));
+        vec![
+            KeyDoc::number(
+                "period_um",
+                "grating period (track pitch)",
+                "um",
+                range::PERIOD_UM,
+                false,
+            )
+            .default_or_required(default(json!(CD_PERIOD_UM))),
+            if cd {
+                coherence.note(format!(
+                    "at least {} periods",
+                    range::COHERENCE_MIN_PERIODS
+                ))
+            } else {
+                coherence
+            },
+            KeyDoc {
+                // (the heights of a tabulated profile)
+                unit: "um",
+                ..KeyDoc::text(
+                "profile",
+                "one period of the height profile",
+                format!(
+                    "\"rect\", \"sine\" or {{\"heights_um\": [...]}} ({} to {} heights over one period, |h| <= {} um)",
+                    range::HEIGHTS_LEN.0,
+                    range::HEIGHTS_LEN.1,
+                    doc_number(range::HEIGHT_UM.1)
+                ),
+            )
+            }
+            .default_or_required(default(json!("rect"))),
+            KeyDoc::number(
+                "height_um",
+                "bump height (rect); peak-to-peak height (sine)",
+                "um",
+                range::HEIGHT_UM,
+                true,
+            )
+            .default_or_required(default(json!(CD_BUMP_HEIGHT_UM)))
+            .note("rect and sine profiles"),
+            width.note(if cd {
+                "rect profile; at most the period"
+            } else {
+                "rect profile"
+            }),
+            KeyDoc::number(
+                "height_um_max",
+                "the largest value of a height texture: the programs serve every height up to it",
+                "um",
+                range::HEIGHT_UM,
+                true,
+            )
+            .note("sine profile; at least height_um; the plugin sets it from a height_um texture"),
+        ]
+    }
+
+    fn resolved(&self, _given: &Map<String, Value>, out: &mut Map<String, Value>) {
+        out.insert("period_um".into(), json!(self.period_um));
+        out.insert("coherence_um".into(), json!(self.coherence_um));
+        match &self.profile {
+            Profile::Rect {
+                height_um,
+                width_um,
+            } => {
+                out.insert("profile".into(), json!("rect"));
+                out.insert("height_um".into(), json!(height_um));
+                out.insert("width_um".into(), json!(width_um));
+            }
+            Profile::Sine { height_um } => {
+                out.insert("profile".into(), json!("sine"));
+                out.insert("height_um".into(), json!(height_um));
+            }
+            Profile::Tabulated { heights_um } => {
+                out.insert("profile".into(), json!({ "heights_um": heights_um }));
+            }
+        }
+        if let Some(max) = self.height_um_max {
+            out.insert("height_um_max".into(), json!(max));
+        }
+    }
+
     fn with_param(&self, id: ParamId, value: f64) -> PeriodicParams {
         let mut p = self.clone();
         match (id, &mut p.profile) {
@@ -111,11 +213,13 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, Stam
     let coherence_range = (coherence_lo, range::COHERENCE_MAX_UM);
     let coherence_um = match r.number("coherence_um")? {
         Some(l) if l < coherence_lo || l > range::COHERENCE_MAX_UM => {
+            let hint = nanometre_hint_above("coherence_um", l, coherence_range, false);
             return Err(err(format!(
-                "parameter 'coherence_um' = {l} is out of range: accepted [{}, {}] um (at least {} periods: the finite-coherence model needs coherence >> period)",
+                "parameter 'coherence_um' = {l} is out of range: accepted [{}, {}] um (at least {} periods: the finite-coherence model needs coherence >> period){}{hint}",
                 format_bound(coherence_lo),
                 format_bound(range::COHERENCE_MAX_UM),
-                range::COHERENCE_MIN_PERIODS
+                range::COHERENCE_MIN_PERIODS,
+                if hint.is_empty() { "" } else { "." }
             )))
         }
         Some(l) => l,
