@@ -845,6 +845,37 @@ private:
         Vector3f wi_c, wo_c;
     };
 
+    /// Whether a value (a Dr.Jit array or a static array of them) holds a
+    /// literal that carries no gradient
+    template <typename T> static bool has_literal(const T &v) {
+        if constexpr (dr::is_jit_v<T> && dr::depth_v<T> == 1) {
+            return jit_var_state(v.index()) == VarState::Literal && !dr::grad_enabled(v);
+        } else if constexpr (dr::is_array_v<T>) {
+            for (size_t i = 0; i < dr::size_v<T>; ++i)
+                if (has_literal(v.entry(i)))
+                    return true;
+            return false;
+        } else {
+            DRJIT_MARK_USED(v);
+            return false;
+        }
+    }
+
+    /// Its literals (without gradients) put in memory (dr::make_opaque)
+    template <typename... Ts> static void in_memory(Ts &...vs) {
+        auto one = [](auto &v, auto &self) -> void {
+            using T = std::decay_t<decltype(v)>;
+            if constexpr (dr::is_jit_v<T> && dr::depth_v<T> == 1) {
+                if (has_literal(v))
+                    dr::make_opaque(v);
+            } else if constexpr (dr::is_array_v<T>) {
+                for (size_t i = 0; i < dr::size_v<T>; ++i)
+                    self(v.entry(i), self);
+            }
+        };
+        (one(vs, one), ...);
+    }
+
     /// The one place that answers eval, pdf and sample: wo / sample1 /
     /// sample2 may be null; want_value / want_pdf select the eval outputs.
     /// JIT variants run the core's programs (jit_path.h), scalar ones call
@@ -852,6 +883,34 @@ private:
     Query make_query(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                      const Vector3f *wo, const Float *sample1, const Point2f *sample2,
                      bool want_value, bool want_pdf, Mask active) const {
+        if constexpr (dr::is_jit_v<Float>) {
+            // A call from Python with Python numbers (a loop over
+            // directions): Dr.Jit would fold the literals into the kernel,
+            // one kernel per value (a compact disc's RGB eval: 0.8 s per
+            // call). In memory instead, they leave the kernel alone
+            // (inside a symbolic scope values are symbols already).
+            if (!jit_flag(JitFlag::SymbolicScope) &&
+                (has_literal(si.wi) || (wo && has_literal(*wo)) || has_literal(si.uv) ||
+                 has_literal(si.dp_du) || has_literal(si.sh_frame.n) ||
+                 has_literal(si.sh_frame.s) || has_literal(si.wavelengths) ||
+                 (sample1 && has_literal(*sample1)) || (sample2 && has_literal(*sample2)))) {
+                SurfaceInteraction3f si_m = si;
+                Vector3f wo_m = wo ? *wo : Vector3f(0.f);
+                Float s1 = sample1 ? *sample1 : Float(0.f);
+                Point2f s2 = sample2 ? *sample2 : Point2f(0.f);
+                in_memory(si_m.wi, wo_m, si_m.uv, si_m.dp_du, si_m.dp_dv, si_m.sh_frame.s,
+                          si_m.sh_frame.t, si_m.sh_frame.n, si_m.wavelengths, s1, s2);
+                return answer(ctx, si_m, wo ? &wo_m : nullptr, sample1 ? &s1 : nullptr,
+                              sample2 ? &s2 : nullptr, want_value, want_pdf, active);
+            }
+        }
+        return answer(ctx, si, wo, sample1, sample2, want_value, want_pdf, active);
+    }
+
+    /// make_query's answer, its inputs as given
+    Query answer(const BSDFContext &ctx, const SurfaceInteraction3f &si, const Vector3f *wo,
+                 const Float *sample1, const Point2f *sample2, bool want_value, bool want_pdf,
+                 Mask active) const {
         Query q;
         q.value = dr::zeros<UnpolarizedSpectrum>();
         q.pdf = dr::zeros<Float>();
