@@ -28,6 +28,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <memory>
+#include <mutex>
 #include <sstream>
 #include <string>
 #include <typeinfo>
@@ -786,9 +788,20 @@ private:
                 // that carries this material is found among the registered
                 // shapes while the code is recorded.
                 check_registered_meshes();
-                UInt32 type = si.shape->shape_type(active);
-                return dr::select(type == (uint32_t) +ShapeType::Disk, UInt32((uint32_t) PolarDisk),
-                                  UInt32((uint32_t) UvShape));
+                if (jit_flag(JitFlag::FreezingScope)) {
+                    UInt32 type = si.shape->shape_type(active);
+                    return dr::select(type == (uint32_t) +ShapeType::Disk,
+                                      UInt32((uint32_t) PolarDisk), UInt32((uint32_t) UvShape));
+                }
+                // The registered shapes' kinds from one array that every
+                // diffraction material reads: Mitsuba's shape_type() getter
+                // makes an array of its own per call, so that two materials
+                // of otherwise identical code traced different code, which
+                // Dr.Jit compiled twice (two compact discs of other twists
+                // beside a diffuse floor: 87,435 operations against 44,384
+                // for one)
+                return dr::gather<UInt32>(registered_shape_kinds(),
+                                          UInt32::borrow(si.shape.index()), active);
             }
             kind = dr::dispatch(
                 si.shape,
@@ -802,6 +815,27 @@ private:
         if (dr::any(active && kind == (uint32_t) MeshWithoutUv))
             throw_mesh_without_uv(bad_mesh);
         return kind;
+    }
+
+    /// Per registry id of the variant's shapes, its kind (PolarDisk or
+    /// UvShape), one array shared by the materials while the shapes stay
+    /// the same (made anew when they change; dropped with the last
+    /// material, before Dr.Jit shuts down)
+    static UInt32 registered_shape_kinds() {
+        const char *variant = Shape::Variant, *domain = Shape::Domain;
+        uint32_t bound = jit_registry_id_bound(variant, domain);
+        std::vector<uint32_t> kinds(bound + 1, (uint32_t) UvShape);
+        for (uint32_t id = 1; id <= bound; ++id) {
+            auto *shape = (const Shape *) jit_registry_ptr(variant, domain, id);
+            if (shape && shape->shape_type() == +ShapeType::Disk)
+                kinds[id] = PolarDisk;
+        }
+        std::lock_guard<std::mutex> guard(s_shared.mutex);
+        if (!s_shared.kinds || kinds != s_shared.kind_values) {
+            s_shared.kinds = std::make_unique<UInt32>(dr::load<UInt32>(kinds.data(), kinds.size()));
+            s_shared.kind_values = std::move(kinds);
+        }
+        return *s_shared.kinds;
     }
 
     [[noreturn]] void throw_mesh_without_uv(const std::string &mesh) const {
@@ -1042,6 +1076,32 @@ private:
     bool m_tracks_given = false;            // `tracks` set by the user (messages)
     ScalarFloat m_center_u = 0.5f, m_center_v = 0.5f;
     State m_saved;                          // the last accepted parameters
+
+    /// What the variant's materials share (registered_shape_kinds), and
+    /// how many materials there are: the last one drops it
+    struct Shared {
+        std::mutex mutex;
+        size_t materials = 0;
+        std::unique_ptr<UInt32> kinds;
+        std::vector<uint32_t> kind_values;
+    };
+    static inline Shared s_shared;
+    struct SharedUse {
+        SharedUse() {
+            std::lock_guard<std::mutex> guard(s_shared.mutex);
+            ++s_shared.materials;
+        }
+        ~SharedUse() {
+            std::lock_guard<std::mutex> guard(s_shared.mutex);
+            if (--s_shared.materials == 0) {
+                s_shared.kinds.reset();
+                s_shared.kind_values.clear();
+            }
+        }
+        SharedUse(const SharedUse &) = delete;
+        SharedUse &operator=(const SharedUse &) = delete;
+    };
+    SharedUse m_shared_use;
 
     ScalarFloat m_cos_twist = 1.f, m_sin_twist = 0.f;
     std::string m_json;

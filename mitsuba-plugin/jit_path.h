@@ -109,7 +109,7 @@ public:
     /// Every program's tables as one array (device memory on CUDA; never
     /// empty), which the material keeps and traverses for dr.freeze.
     FloatStorage load_tables() const {
-        const std::vector<float> &t = m_host_tables.values();
+        std::vector<float> t = m_host_tables.buffer();
         return t.empty() ? dr::zeros<FloatStorage>(1)
                          : dr::load<FloatStorage>(t.data(), t.size());
     }

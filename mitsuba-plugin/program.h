@@ -127,6 +127,9 @@ struct Code {
     size_t gathers = 0;
     /// Where each table starts in the buffer the caller loads (Program).
     std::vector<uint32_t> table_base;
+    /// Where the program's entries of that buffer's table directory start
+    /// (TableStorage: two per table, its start and last index)
+    uint32_t dir_offset = 0;
 };
 
 /// Thrown for an array that is not a well-formed program.
@@ -304,11 +307,16 @@ inline std::vector<float> export_program(const StamBrdf *b, uint32_t kind) {
 /// The host values of the tables of several programs, each distinct table
 /// once (programs of one material share some: the spectral Gaussian's eval
 /// and pdf read the same 281,502-value series table), loaded by the caller
-/// into one device array.
+/// into one device array, which opens with a directory: per table of each
+/// program, where it starts and its last index (as the bits of a float).
+/// The programs read those from memory, not as constants of their code, so
+/// that two materials whose programs differ only in their tables' numbers
+/// and sizes trace to the same code, which Dr.Jit compiles once for both
+/// (a symbolic call traces every material alive; docs/jit.md).
 class TableStorage {
 public:
     /// Where `n` values equal to `src` start in the storage (appended unless
-    /// an equal table is there already).
+    /// an equal table is there already), before the directory.
     uint32_t add(const float *src, size_t n) {
         uint64_t h = 1469598103934665603ull ^ n; // FNV-1a over the bits
         const unsigned char *bytes = (const unsigned char *) src;
@@ -320,18 +328,41 @@ public:
                 (n == 0 || std::memcmp(m_values.data() + it->second.first, src,
                                        n * sizeof(float)) == 0))
                 return it->second.first;
-        if (m_values.size() + n >= (size_t(1) << 31))
-            throw Malformed("tables of more than 2^31 values");
+        if (m_values.size() + n >= (size_t(1) << 30))
+            throw Malformed("tables of more than 2^30 values");
         uint32_t base = (uint32_t) m_values.size();
         m_values.insert(m_values.end(), src, src + n);
         m_index.emplace(h, std::make_pair(base, n));
         return base;
     }
-    const std::vector<float> &values() const { return m_values; }
-    bool empty() const { return m_values.empty(); }
+
+    /// The directory entries of one program's tables (their starts from
+    /// `add` and lengths): returns where they start in the directory.
+    uint32_t add_directory(const std::vector<uint32_t> &base, const std::vector<size_t> &len) {
+        uint32_t at = (uint32_t) m_dir.size();
+        for (size_t t = 0; t < base.size(); ++t) {
+            m_dir.push_back(base[t]);
+            m_dir.push_back((uint32_t) (len[t] ? len[t] - 1 : 0));
+        }
+        return at;
+    }
+
+    /// The array to load: the directory (each start moved past it), then
+    /// the tables' values
+    std::vector<float> buffer() const {
+        std::vector<float> out(m_dir.size() + m_values.size());
+        for (size_t k = 0; k < m_dir.size(); ++k) {
+            uint32_t v = m_dir[k] + (k % 2 == 0 ? (uint32_t) m_dir.size() : 0u);
+            std::memcpy(&out[k], &v, sizeof(v));
+        }
+        std::copy(m_values.begin(), m_values.end(), out.begin() + m_dir.size());
+        return out;
+    }
+    bool empty() const { return m_values.empty() && m_dir.empty(); }
 
 private:
     std::vector<float> m_values;
+    std::vector<uint32_t> m_dir;
     std::unordered_multimap<uint64_t, std::pair<uint32_t, size_t>> m_index;
 };
 
@@ -372,6 +403,7 @@ public:
         for (size_t t = 0; t < code.table_offset.size(); ++t)
             code.table_base.push_back(
                 storage.add(v.data() + code.table_offset[t], code.table_len[t]));
+        code.dir_offset = storage.add_directory(code.table_base, code.table_len);
         m_code = std::make_shared<const Code>(std::move(code));
     }
 
@@ -576,16 +608,23 @@ private:
 
     /// Table t at the index x: NaN to 0, clamped into [0, len - 1],
     /// truncated (the core's Op::Gather), so that no lane reads outside it.
+    /// Where the table starts and its last index come from the buffer's
+    /// directory (TableStorage), not from constants in the code.
     template <typename Storage>
     static Float gather(const Code &code, uint32_t t, const Float &x, const Storage &tables) {
-        size_t len = code.table_len[t];
-        if (len == 0)
+        if (code.table_len[t] == 0)
             return Float(0.f);
         using FloatD = dr::detached_t<Float>;
         using UInt32D = dr::uint32_array_t<FloatD>;
+        auto entry = [&](uint32_t k) {
+            return dr::reinterpret_array<UInt32D>(dr::gather<FloatD>(
+                dr::detach<false>(tables), UInt32D(code.dir_offset + 2 * t + k)));
+        };
+        UInt32D base = entry(0);
+        FloatD last = FloatD(entry(1));
         FloatD xd = dr::detach<false>(x);
-        FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, (float) (len - 1));
-        UInt32 idx = UInt32(UInt32D(xi) + code.table_base[t]);
+        FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, last);
+        UInt32 idx = UInt32(UInt32D(xi) + base);
         return dr::gather<Float>(tables, idx);
     }
 

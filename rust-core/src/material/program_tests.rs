@@ -153,3 +153,56 @@ fn a_nearby_material_exports_the_same_code() {
         }
     }
 }
+
+/// Materials of one model that differ only in numbers (not in structure:
+/// the same metal, the same anisotropy, the same Hurst exponent) export
+/// programs with the same code: their tables' values and sizes, the
+/// parameters' values and the built constants are data, which a renderer
+/// reads from memory. So a tracing renderer compiles their code once for
+/// all of them (the plugin reads the tables' starts and sizes from memory
+/// too, mitsuba-plugin/program.h; Dr.Jit then traces identical code for
+/// each material alive and compiles it once; docs/jit.md).
+#[test]
+fn materials_differing_in_numbers_share_their_code() {
+    let pairs = [
+        (
+            r#"{"surface":"gaussian","sigma_um":0.1,"corr_um":2.0}"#,
+            r#"{"surface":"gaussian","sigma_um":0.3,"corr_um":5.0}"#,
+        ),
+        (
+            r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":1.0,"fresnel":"gold"}"#,
+            r#"{"surface":"gaussian","sigma_um":0.2,"corr_um":3.0,"fresnel":"gold"}"#,
+        ),
+        (
+            r#"{"surface":"fractal","sigma_um":0.1,"hurst":0.7,"lag_um":1.0}"#,
+            r#"{"surface":"fractal","sigma_um":0.12,"hurst":0.7,"lag_um":1.3}"#,
+        ),
+    ];
+    for (a, b) in pairs {
+        let (ma, mb) = (Brdf::from_json(a).unwrap(), Brdf::from_json(b).unwrap());
+        for kind in ProgramKind::ALL {
+            for at_built in [false, true] {
+                let export = |m: &Brdf| {
+                    if at_built {
+                        m.program_at_built(kind)
+                    } else {
+                        m.program(kind)
+                    }
+                };
+                let (pa, pb) = (export(&ma), export(&mb));
+                assert_eq!(pa.is_some(), pb.is_some(), "{a} / {b} {kind:?} {at_built}");
+                let (Some(pa), Some(pb)) = (pa, pb) else {
+                    continue;
+                };
+                assert_eq!(
+                    pa.code, pb.code,
+                    "{a} / {b}: {kind:?} (at built: {at_built})"
+                );
+                assert_eq!(pa.tables.len(), pb.tables.len());
+                let ids =
+                    |p: &crate::program::Program| p.params.iter().map(|q| q.0).collect::<Vec<_>>();
+                assert_eq!(ids(&pa), ids(&pb));
+            }
+        }
+    }
+}

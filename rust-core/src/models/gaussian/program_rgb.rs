@@ -261,8 +261,10 @@ pub(crate) fn rgb_from_table<'a>(
     let ln_g0 = sw.ln() * 2.0;
     let x0 = pair.u * pair.u * (tx * tx * 0.25) + pair.v * pair.v * (ty * ty * 0.25);
     // Rows: below the lowest the values repeat it (ln(S / g0) constant).
-    let fu = ((ln_g0 - t.ln_g0_lo) * (1.0 / D_U)).clamp(0.0, (t.rows - 1) as f64);
-    let iu = fu.floor().min((t.rows - 2) as f64);
+    // Their range is the material's: built values, so that materials whose
+    // tables differ only in rows share the program's code.
+    let fu = ((ln_g0 - b.built(t.ln_g0_lo)) * (1.0 / D_U)).clamp(0.0, b.built((t.rows - 1) as f64));
+    let iu = fu.floor().min(b.built((t.rows - 2) as f64));
     let rho2 = x0 / (g0 + t.inv_k_ref2);
     let fv = (rho2 / (rho2 * (1.0 / (MAP_R * MAP_R)) + 1.0).sqrt()).sqrt() * (1.0 / D_V);
     let inside = fv.lt((t.cols - 1) as f64);
@@ -294,7 +296,9 @@ pub(crate) fn rgb_from_table<'a>(
                 c - cos_table
             });
             std::array::from_fn(|i| {
-                let at_table = cone.fma(t.cos_slope[i], v[1 + i]);
+                // The metal's slope: a built value (materials of other
+                // metals share the code)
+                let at_table = cone.fma(b.built(t.cos_slope[i]), v[1 + i]);
                 match dc {
                     Some(dc) => dc.fma(v[4 + i], at_table) * n,
                     None => at_table * n,
