@@ -5,7 +5,8 @@ on a clean checkout (cold Dr.Jit cache; seconds measured 2026-12-02 with
 --durations=0, summed per file) go first and the short ones fill the gaps
 (longest-first scheduling). Files not listed keep their place after them.
 test_gradients.py and test_inverse.py re-estimated 2026-12-03 from the
-slowest tests of a clean-clone CI run. On the slower 2-core AMD EPYC of
+slowest tests of a clean-clone CI run; test_gradients.py again 2026-12-05
+(its reverse-mode and rebuilt-material tests, cold, alone). On the slower 2-core AMD EPYC of
 later sessions every file took 2-4 times these (test_gradients.py ~1,650 s
 before its grating tests moved to the `direct` integrator, ~930 s after;
 test_inverse.py ~480 s), in the same order."""
@@ -13,7 +14,7 @@ test_inverse.py ~480 s), in the same order."""
 COLD_SECONDS = {
     'test_jit.py': 314,
     'test_jit_render.py': 284,
-    'test_gradients.py': 250,
+    'test_gradients.py': 630,
     'test_inverse.py': 150,
     'test_plugin.py': 70,
     'test_textures.py': 48,
