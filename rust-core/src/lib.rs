@@ -17,6 +17,7 @@ pub mod material;
 pub mod models;
 pub mod optics;
 pub mod program;
+pub mod rigorous;
 pub mod sampling;
 pub mod special;
 pub mod spectrum;
