@@ -159,6 +159,28 @@ fuzz_target!(|data: &[u8]| {
         );
         let reference = stam_parameter_reference();
         assert!(!reference.is_null() && std::ffi::CStr::from_ptr(reference).to_str().is_ok());
+        // A rigorous solve of a rect grating made of the floats: refused with
+        // a message, or finite efficiencies >= 0 (NaN and Inf become null).
+        let request = serde_json::json!({
+            "period_um": at(0), "profile": "rect", "height_um": at(1), "width_um": at(2),
+            "fresnel": {"eta": at(3), "k": at(4)}, "lambda_nm": at(5), "theta_deg": at(6),
+            "phi_deg": at(7), "orders": (at(8).abs() as usize).min(6),
+        });
+        let request = CString::new(request.to_string()).unwrap();
+        let answer = stam_rigorous_solve(request.as_ptr(), err.as_mut_ptr(), err.len());
+        if answer.is_null() {
+            assert!(err[0] != 0, "a rigorous request refused without a message");
+        } else {
+            let text = std::ffi::CStr::from_ptr(answer).to_str().expect("UTF-8 answer");
+            let value: serde_json::Value = serde_json::from_str(text).expect("JSON answer");
+            for order in value["reflected"].as_array().expect("reflected orders") {
+                for pol in 0..2 {
+                    let e = order["efficiency"][pol].as_f64().unwrap_or(f64::NAN);
+                    assert!(e.is_finite() && e >= 0.0, "rigorous efficiency {e}");
+                }
+            }
+            stam_text_free(answer);
+        }
         stam_brdf_free(p);
     }
 });

@@ -192,6 +192,8 @@ def lib():
         'stam_brdf_params_json': (ctypes.c_char_p, [vp]),
         'stam_parameter_reference': (ctypes.c_char_p, []),
         'stam_version': (ctypes.c_char_p, []),
+        'stam_rigorous_solve': (ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_char_p, sz]),
+        'stam_text_free': (None, [ctypes.c_void_p]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(L, name)
@@ -199,6 +201,23 @@ def lib():
         fn.argtypes = args
     _lib = L
     return L
+
+
+def rigorous_solve(**request):
+    """Rigorous grating efficiencies (stam_rigorous_solve): keyword arguments
+    as the request's keys (period_um, profile, height_um, width_um,
+    heights_um, slices, fresnel, cover_eta, lambda_nm, theta_deg, phi_deg,
+    orders, rule); returns the answer as a dict. Raises ValueError with the
+    core's message on bad input."""
+    L = lib()
+    err = ctypes.create_string_buffer(1024)
+    ptr = L.stam_rigorous_solve(json.dumps(request).encode(), err, len(err))
+    if not ptr:
+        raise ValueError(err.value.decode())
+    try:
+        return json.loads(ctypes.string_at(ptr).decode())
+    finally:
+        L.stam_text_free(ptr)
 
 
 def version():

@@ -217,6 +217,22 @@ const char *stam_parameter_reference(void);
    RGB table once the first RGB evaluation has built it). */
 size_t stam_brdf_memory_bytes(const StamBrdf *b);
 
+/* Rigorous grating efficiencies (the Fourier modal method, docs/rigorous.md).
+ * request_json: {"period_um", "profile": "rect"|"sine"|"tabulated",
+ * "height_um", "width_um" (rect), "heights_um" (tabulated), "slices" (16),
+ * "fresnel": a metal's name or {"eta", "k"}, "cover_eta" (1), "lambda_nm",
+ * "theta_deg", "phi_deg" (0: plane of incidence across the grooves),
+ * "orders" (N = 40: orders -N..N), "rule": "li"|"laurent"}. Returns JSON
+ * {"orders", "reflected": [order...], "transmitted": [order...],
+ * "reflectance": [s, p], "transmittance": [s, p]}, each order {"m",
+ * "direction" (unit, z down into the substrate), "efficiency": [s, p],
+ * "jones": 2x2 of [re, im], rows outgoing s/p, columns incident s/p}, to be
+ * freed with stam_text_free; NULL with the message in err on bad input. */
+char *stam_rigorous_solve(const char *request_json, char *err, size_t err_len);
+
+/* Frees a string returned by stam_rigorous_solve (NULL is ignored). */
+void stam_text_free(char *text);
+
 /* Library version string, e.g. "0.1.0" (static storage). */
 const char *stam_version(void);
 

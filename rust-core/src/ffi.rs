@@ -650,3 +650,46 @@ pub extern "C" fn stam_parameter_reference() -> *const c_char {
 pub extern "C" fn stam_version() -> *const c_char {
     concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr() as *const c_char
 }
+
+/// # Safety
+/// `request_json` must be NULL or a NUL-terminated string; `err` NULL or
+/// writable for `err_len` bytes. The answer is freed with `stam_text_free`.
+#[no_mangle]
+pub unsafe extern "C" fn stam_rigorous_solve(
+    request_json: *const c_char,
+    err: *mut c_char,
+    err_len: usize,
+) -> *mut c_char {
+    if request_json.is_null() {
+        write_message(err, err_len, "request_json is NULL");
+        return std::ptr::null_mut();
+    }
+    let Ok(text) = CStr::from_ptr(request_json).to_str() else {
+        write_message(err, err_len, "request_json is not valid UTF-8");
+        return std::ptr::null_mut();
+    };
+    match catch_unwind(|| crate::rigorous::request::solve_json(text)) {
+        Ok(Ok(answer)) => {
+            write_message(err, err_len, "");
+            c_text(answer).into_raw()
+        }
+        Ok(Err(e)) => {
+            write_message(err, err_len, &e.message);
+            std::ptr::null_mut()
+        }
+        Err(payload) => {
+            write_message(err, err_len, &panic_message(payload));
+            std::ptr::null_mut()
+        }
+    }
+}
+
+/// # Safety
+/// `text` must be NULL or a string returned by a stam function that says
+/// it is freed here, freed once.
+#[no_mangle]
+pub unsafe extern "C" fn stam_text_free(text: *mut c_char) {
+    if !text.is_null() {
+        drop(CString::from_raw(text));
+    }
+}

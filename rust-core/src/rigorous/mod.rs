@@ -8,10 +8,15 @@
 //! method, its references and its measured convergence and accuracy.
 
 pub mod layers;
+pub mod request;
 pub mod solver;
+pub mod table;
 
 #[cfg(test)]
 mod tests;
 
 pub use layers::{Grating, Layer, Medium, Stack};
-pub use solver::{solve, solve_with, Diffraction, Factorisation, Incidence, Order, MAX_ORDERS};
+pub use solver::{
+    prepare, solve, solve_with, Diffraction, Factorisation, Incidence, Order, Prepared, MAX_ORDERS,
+};
+pub use table::{EfficiencyTable, TableSpec};

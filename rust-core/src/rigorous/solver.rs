@@ -32,7 +32,7 @@ use super::layers::{Layer, Stack};
 use crate::StamError;
 
 /// Largest order count N (2N + 1 orders; matrices of 4N + 2).
-pub const MAX_ORDERS: usize = 400;
+pub const MAX_ORDERS: usize = 200;
 
 /// How products of the permittivity with a field are truncated in Fourier
 /// space. `Li` is the correct rule (and the solver's); `Laurent` multiplies
@@ -68,7 +68,7 @@ pub struct Order {
     /// Jones matrix: jones[a][b] = amplitude of outgoing polarisation a
     /// (0 = s, 1 = p) for unit incident polarisation b, scaled so that
     /// sum_a |jones[a][b]|^2 = efficiency[b]. s = z x k / |z x k| and
-    /// p = s x k for a direction k (s = (-sin phi, cos phi, 0) along z).
+    /// p = s x k for a direction k (s along the grooves, y, when k is along z).
     pub jones: [[c64; 2]; 2],
 }
 
@@ -113,28 +113,75 @@ fn sum_efficiency(orders: &[Order]) -> [f64; 2] {
     })
 }
 
-/// Modes of one region: tangential E = W c, tangential H = V c for the
-/// down-going modes (up-going: W c, -V c), propagation constants gamma.
-struct Modes {
-    w: Option<Mat<c64>>, // None: identity (a homogeneous region)
-    v: Mat<c64>,
-    gamma: Vec<c64>,
+/// A linear map on the 2(2N + 1) tangential amplitudes (Ex rows, then Ey):
+/// the identity, one 2x2 block per order (homogeneous media), or dense.
+enum Op {
+    Identity,
+    /// Block i acts on rows (i, m + i): [[a, b], [c, d]].
+    Blocks(Vec<[c64; 4]>),
+    Dense(Mat<c64>),
 }
 
-/// Wavevector components of the retained orders.
-struct Orders {
-    n: usize,
-    kx: Vec<f64>,
-    ky: f64,
-}
+impl Op {
+    /// self * x.
+    fn apply(&self, x: Mat<c64>) -> Mat<c64> {
+        match self {
+            Op::Identity => x,
+            Op::Dense(a) => a * &x,
+            Op::Blocks(blocks) => {
+                let m = blocks.len();
+                let mut y = x;
+                for c in 0..y.ncols() {
+                    for (i, [a, b, cc, d]) in blocks.iter().enumerate() {
+                        let (u, v) = (y[(i, c)], y[(m + i, c)]);
+                        y[(i, c)] = a * u + b * v;
+                        y[(m + i, c)] = cc * u + d * v;
+                    }
+                }
+                y
+            }
+        }
+    }
 
-impl Orders {
-    fn size(&self) -> usize {
-        self.kx.len()
+    /// x * self.
+    fn apply_right(&self, x: Mat<c64>) -> Mat<c64> {
+        match self {
+            Op::Identity => x,
+            Op::Dense(a) => &x * a,
+            Op::Blocks(blocks) => {
+                let m = blocks.len();
+                let mut y = x;
+                for r in 0..y.nrows() {
+                    for (i, [a, b, c, d]) in blocks.iter().enumerate() {
+                        let (u, v) = (y[(r, i)], y[(r, m + i)]);
+                        y[(r, i)] = u * a + v * c;
+                        y[(r, m + i)] = u * b + v * d;
+                    }
+                }
+                y
+            }
+        }
+    }
+
+    fn dense(&self, dim: usize) -> Mat<c64> {
+        match self {
+            Op::Dense(a) => a.clone(),
+            _ => self.apply(Mat::identity(dim, dim)),
+        }
     }
 }
 
-/// k_z = sqrt(eps - kx^2 - ky^2) on the branch Im >= 0 (Re >= 0 when real),
+/// Modes of one region at one ky: tangential E = W c, tangential H = V c for
+/// the down-going modes (up-going: W c, -V c), propagation constants gamma.
+struct Modes {
+    w: Op,
+    w_inv: Op,
+    v: Op,
+    v_inv: Op,
+    gamma: Vec<c64>,
+}
+
+/// k_z = sqrt(eps - kt^2) on the branch Im >= 0 (Re >= 0 when real),
 /// nudged off 0 (an order exactly grazing: a Rayleigh anomaly) so that the
 /// mode matrices stay invertible.
 fn kz(eps: c64, kt2: f64) -> c64 {
@@ -148,117 +195,189 @@ fn kz(eps: c64, kt2: f64) -> c64 {
     s
 }
 
-/// Modes of a homogeneous region: plane waves, W = I.
-fn homogeneous(orders: &Orders, eps: c64) -> Modes {
-    let m = orders.size();
-    let ky = orders.ky;
-    let gamma: Vec<c64> = orders
-        .kx
+/// Modes of a homogeneous region: plane waves, W = I, and V = Q gamma^-1 a
+/// 2x2 block per order.
+fn homogeneous(kx: &[f64], ky: f64, eps: c64) -> Modes {
+    let gamma: Vec<c64> = kx.iter().map(|&k| kz(eps, k * k + ky * ky)).collect();
+    let blocks: Vec<[c64; 4]> = kx
         .iter()
-        .map(|&kx| kz(eps, kx * kx + ky * ky))
+        .zip(&gamma)
+        .map(|(&k, &g)| {
+            [
+                c64::new(-ky * k, 0.0) / g,
+                (c64::new(k * k, 0.0) - eps) / g,
+                (eps - ky * ky) / g,
+                c64::new(ky * k, 0.0) / g,
+            ]
+        })
         .collect();
-    let mut v = Mat::<c64>::zeros(2 * m, 2 * m);
-    for (i, &kx) in orders.kx.iter().enumerate() {
-        let g = gamma[i];
-        // V = Q gamma^-1 with Q's 2x2 block of order i.
-        v[(i, i)] = c64::new(-ky * kx, 0.0) / g;
-        v[(i, m + i)] = (c64::new(kx * kx, 0.0) - eps) / g;
-        v[(m + i, i)] = (eps - ky * ky) / g;
-        v[(m + i, m + i)] = c64::new(ky * kx, 0.0) / g;
-    }
+    let inverse = blocks
+        .iter()
+        .map(|[a, b, c, d]| {
+            let det = a * d - b * c;
+            [d / det, -b / det, -c / det, a / det]
+        })
+        .collect();
     Modes {
-        w: None,
-        v,
+        w: Op::Identity,
+        w_inv: Op::Identity,
+        v: Op::Blocks(blocks),
+        v_inv: Op::Blocks(inverse),
         gamma: gamma.iter().chain(gamma.iter()).cloned().collect(),
     }
 }
 
-/// Modes of a lamellar layer: the eigenproblem P Q.
-/// Modes of a lamellar layer. P Q is block lower-triangular,
+/// What a lamellar layer's modes need that does not depend on ky. P Q is
+/// block lower-triangular,
 ///
 ///   P Q = [[(I - Kx E^-1 Kx) [[1/eps]]^-1 - ky^2, 0], [C, E - Kx^2 - ky^2]],
 ///
 /// because a layer that varies along x alone has modes with E_x = 0 (the
-/// lower block's eigenvectors, "TE to x") and with H_x = 0 (the upper
-/// block's, "TM to x"), whose E_y follows from H_x = 0:
-/// E_y = -ky (E - Kx^2)^-1 Kx E_x. Two eigenproblems of 2N + 1 instead of one
-/// of 4N + 2 (about 4x faster), and ky only shifts their eigenvalues.
-fn lamellar(orders: &Orders, layer: &Layer, rule: Factorisation) -> Result<Modes, StamError> {
-    let m = orders.size();
-    let ky = orders.ky;
-    let laurent = layer.toeplitz(m, |e| e);
-    let inverse_rule = match rule {
-        Factorisation::Li => layer.toeplitz(m, |e| e.inv()).partial_piv_lu().inverse(),
-        Factorisation::Laurent => laurent.clone(),
-    };
-    let laurent_inv = laurent.partial_piv_lu().inverse();
-    let kx = &orders.kx;
-    // (I - Kx E^-1 Kx) [[1/eps]]^-1 and E - Kx^2, without the -ky^2 shift.
-    let kek = Mat::from_fn(m, m, |r, c| {
-        let delta = if r == c { 1.0 } else { 0.0 };
-        c64::new(delta, 0.0) - laurent_inv[(r, c)] * (kx[r] * kx[c])
-    });
-    let tm_matrix = &kek * &inverse_rule;
-    let mut te_matrix = laurent.clone();
-    for (i, &k) in kx.iter().enumerate() {
-        te_matrix[(i, i)] -= k * k;
-    }
-    let eig = |a: &Mat<c64>| {
-        a.eigen()
-            .map_err(|e| StamError::new(format!("rigorous solver: eigenproblem failed ({e:?})")))
-    };
-    let tm = eig(&tm_matrix)?;
-    let te = eig(&te_matrix)?;
-    let tm_ex = tm.U();
-    // E_y of the H_x = 0 modes: -ky (E - Kx^2)^-1 Kx E_x.
-    let kx_ex = Mat::from_fn(m, m, |r, c| tm_ex[(r, c)] * kx[r]);
-    let tm_ey = te_matrix.partial_piv_lu().solve(&kx_ex);
-    let mut w = Mat::<c64>::zeros(2 * m, 2 * m);
-    for r in 0..m {
-        for c in 0..m {
-            w[(r, c)] = tm_ex[(r, c)];
-            w[(m + r, c)] = tm_ey[(r, c)] * (-ky);
-            w[(m + r, m + c)] = te.U()[(r, c)];
-        }
-    }
-    let gamma: Vec<c64> = tm
-        .S()
-        .column_vector()
-        .iter()
-        .chain(te.S().column_vector().iter())
-        .map(|&g2| kz(g2, ky * ky))
-        .collect();
-    // V = Q W gamma^-1.
-    let mut q = Mat::<c64>::zeros(2 * m, 2 * m);
-    for r in 0..m {
-        for c in 0..m {
-            q[(r, m + c)] = -laurent[(r, c)];
-            q[(m + r, c)] = inverse_rule[(r, c)];
-        }
-        q[(r, r)] = c64::new(-ky * kx[r], 0.0);
-        q[(r, m + r)] += kx[r] * kx[r];
-        q[(m + r, r)] -= ky * ky;
-        q[(m + r, m + r)] = c64::new(ky * kx[r], 0.0);
-    }
-    let mut v = &q * &w;
-    for (c, g) in gamma.iter().enumerate() {
-        let inv = g.inv();
-        for r in 0..2 * m {
-            v[(r, c)] *= inv;
-        }
-    }
-    Ok(Modes {
-        w: Some(w),
-        v,
-        gamma,
-    })
+/// lower block's eigenvectors Y, "TE to x") and with H_x = 0 (the upper
+/// block's X, "TM to x"), whose E_y follows from H_x = 0:
+/// E_y = -ky (E - Kx^2)^-1 Kx X = -ky Z. Two eigenproblems of 2N + 1
+/// instead of one of 4N + 2, and ky only shifts their eigenvalues, so one
+/// decomposition serves every ky (an efficiency table's whole row). With
+/// G = E - Kx^2, whose eigen-decomposition is Y diag(lambda_y) Y^-1:
+///
+///   W = [[X, 0], [-ky Z, Y]],  W^-1 = [[X^-1, 0], [ky Y^-1 Z X^-1, Y^-1]],
+///   V = [[0, -Y lambda_y / gamma_y], [(Ex X - ky^2 S) / gamma_x, ky Kx Y / gamma_y]]
+///
+/// with S = X + Kx Z and Ex the inverse-rule matrix.
+struct Lamellar {
+    x: Mat<c64>,
+    x_inv: Mat<c64>,
+    lambda_x: Vec<c64>,
+    y: Mat<c64>,
+    y_inv: Mat<c64>,
+    lambda_y: Vec<c64>,
+    z: Mat<c64>,
+    /// Y^-1 Z X^-1.
+    t: Mat<c64>,
+    /// Ex X.
+    ex_x: Mat<c64>,
+    s: Mat<c64>,
+    /// Kx G^-1.
+    kx_g_inv: Mat<c64>,
 }
 
-fn modes(orders: &Orders, layer: &Layer, rule: Factorisation) -> Result<Modes, StamError> {
-    match layer.uniform_permittivity() {
-        Some(eps) => Ok(homogeneous(orders, eps)),
-        None => lamellar(orders, layer, rule),
+fn eigen(a: &Mat<c64>) -> Result<(Mat<c64>, Vec<c64>), StamError> {
+    let e = a
+        .eigen()
+        .map_err(|e| StamError::new(format!("rigorous solver: eigenproblem failed ({e:?})")))?;
+    Ok((
+        e.U().to_owned(),
+        e.S().column_vector().iter().cloned().collect(),
+    ))
+}
+
+impl Lamellar {
+    fn new(kx: &[f64], layer: &Layer, rule: Factorisation) -> Result<Lamellar, StamError> {
+        let m = kx.len();
+        let laurent = layer.toeplitz(m, |e| e);
+        let inverse_rule = match rule {
+            Factorisation::Li => layer.toeplitz(m, |e| e.inv()).partial_piv_lu().inverse(),
+            Factorisation::Laurent => laurent.clone(),
+        };
+        let laurent_inv = laurent.partial_piv_lu().inverse();
+        // (I - Kx E^-1 Kx) Ex and G = E - Kx^2.
+        let kek = Mat::from_fn(m, m, |r, c| {
+            let delta = if r == c { 1.0 } else { 0.0 };
+            c64::new(delta, 0.0) - laurent_inv[(r, c)] * (kx[r] * kx[c])
+        });
+        let (x, lambda_x) = eigen(&(&kek * &inverse_rule))?;
+        let mut g = laurent;
+        for (i, &k) in kx.iter().enumerate() {
+            g[(i, i)] -= k * k;
+        }
+        let (y, lambda_y) = eigen(&g)?;
+        let g_lu = g.partial_piv_lu();
+        let kx_x = Mat::from_fn(m, m, |r, c| x[(r, c)] * kx[r]);
+        let z = g_lu.solve(&kx_x);
+        let kx_diag = Mat::from_fn(m, m, |r, c| {
+            if r == c {
+                c64::new(kx[r], 0.0)
+            } else {
+                c64::new(0.0, 0.0)
+            }
+        });
+        // Kx G^-1 = (G^-T Kx)^T.
+        let kx_g_inv = g_lu.solve_transpose(&kx_diag).transpose().to_owned();
+        let x_inv = x.partial_piv_lu().inverse();
+        let y_inv = y.partial_piv_lu().inverse();
+        let t = &y_inv * &z * &x_inv;
+        let ex_x = &inverse_rule * &x;
+        let s = Mat::from_fn(m, m, |r, c| x[(r, c)] + z[(r, c)] * kx[r]);
+        Ok(Lamellar {
+            x,
+            x_inv,
+            lambda_x,
+            y,
+            y_inv,
+            lambda_y,
+            z,
+            t,
+            ex_x,
+            s,
+            kx_g_inv,
+        })
     }
+
+    fn modes(&self, kx: &[f64], ky: f64) -> Modes {
+        let m = kx.len();
+        let ky2 = ky * ky;
+        let gamma_x: Vec<c64> = self.lambda_x.iter().map(|&l| kz(l, ky2)).collect();
+        let gamma_y: Vec<c64> = self.lambda_y.iter().map(|&l| kz(l, ky2)).collect();
+        let mut w = Mat::<c64>::zeros(2 * m, 2 * m);
+        let mut w_inv = Mat::<c64>::zeros(2 * m, 2 * m);
+        let mut v = Mat::<c64>::zeros(2 * m, 2 * m);
+        let mut v_inv = Mat::<c64>::zeros(2 * m, 2 * m);
+        // C = (Ex X - ky^2 S) / gamma_x; C^-1 = gamma_x (Ex X - ky^2 S)^-1.
+        let c_core = Mat::from_fn(m, m, |r, c| self.ex_x[(r, c)] - self.s[(r, c)] * ky2);
+        let c_core_inv = c_core.partial_piv_lu().inverse();
+        let c_inv_kx_g_inv = &c_core_inv * &self.kx_g_inv;
+        for r in 0..m {
+            for c in 0..m {
+                w[(r, c)] = self.x[(r, c)];
+                w[(m + r, c)] = self.z[(r, c)] * (-ky);
+                w[(m + r, m + c)] = self.y[(r, c)];
+                w_inv[(r, c)] = self.x_inv[(r, c)];
+                w_inv[(m + r, c)] = self.t[(r, c)] * ky;
+                w_inv[(m + r, m + c)] = self.y_inv[(r, c)];
+                v[(r, m + c)] = -self.y[(r, c)] * self.lambda_y[c] / gamma_y[c];
+                v[(m + r, c)] = c_core[(r, c)] / gamma_x[c];
+                v[(m + r, m + c)] = self.y[(r, c)] * (ky * kx[r]) / gamma_y[c];
+                // V^-1 = [[-C^-1 D B^-1, C^-1], [B^-1, 0]], where
+                // -C^-1 D B^-1 = ky C^-1 Kx G^-1 and B^-1 = -(gamma_y / lambda_y) Y^-1.
+                v_inv[(r, c)] = gamma_x[r] * c_inv_kx_g_inv[(r, c)] * ky;
+                v_inv[(r, m + c)] = gamma_x[r] * c_core_inv[(r, c)];
+                v_inv[(m + r, c)] = -gamma_y[r] / self.lambda_y[r] * self.y_inv[(r, c)];
+            }
+        }
+        Modes {
+            w: Op::Dense(w),
+            w_inv: Op::Dense(w_inv),
+            v: Op::Dense(v),
+            v_inv: Op::Dense(v_inv),
+            gamma: gamma_x.into_iter().chain(gamma_y).collect(),
+        }
+    }
+}
+
+enum LayerBasis {
+    Homogeneous(c64),
+    Lamellar(Box<Lamellar>),
+}
+
+/// A stack prepared at one wavelength and one kx of the incident light:
+/// every layer's eigen-decomposition, for any ky (`Prepared::solve`).
+pub struct Prepared {
+    n_orders: usize,
+    kx: Vec<f64>,
+    k0: f64,
+    superstrate_index: f64,
+    substrate_eps: c64,
+    layers: Vec<(f64, LayerBasis)>,
 }
 
 /// One matched interface, kept for the downward (transmission) pass.
@@ -267,6 +386,225 @@ struct Interface {
     sum: faer::linalg::solvers::PartialPivLu<c64>,
     /// exp(i gamma d) of the layer below (None for the substrate).
     phase_below: Option<Vec<c64>>,
+}
+
+/// Match tangential fields at an interface: W_a (u + b) = W_b (I + R) f and
+/// V_a (u - b) = V_b (I - R) f, with R the reflection matrix at the top of
+/// the medium below (None: nothing comes back up, the substrate). Returns
+/// the LU of A + B and A - B, where u = (A + B) f / 2, b = (A - B) f / 2.
+fn match_interface(
+    above: &Modes,
+    below: &Modes,
+    reflection: Option<&Mat<c64>>,
+    dim: usize,
+) -> (faer::linalg::solvers::PartialPivLu<c64>, Mat<c64>) {
+    let (a, b) = match reflection {
+        None => (
+            below.w.apply_right(above.w_inv.dense(dim)),
+            below.v.apply_right(above.v_inv.dense(dim)),
+        ),
+        Some(r) => {
+            let identity = Mat::<c64>::identity(dim, dim);
+            let a = above.w_inv.apply(below.w.apply(&identity + r));
+            let b = above.v_inv.apply(below.v.apply(&identity - r));
+            (a, b)
+        }
+    };
+    ((&a + &b).partial_piv_lu(), &a - &b)
+}
+
+impl Prepared {
+    /// Solve for both incident polarisations at `ky` (the incident
+    /// tangential wavevector is (kx, ky) over k0).
+    pub fn solve(&self, ky: f64) -> Diffraction {
+        let m = self.kx.len();
+        let dim = 2 * m;
+        let n1 = self.superstrate_index;
+        let kx0 = self.kx[self.n_orders];
+        // Upward pass: the reflection matrix at the top of each medium.
+        let mut below = homogeneous(&self.kx, ky, self.substrate_eps);
+        let mut phase_below: Option<Vec<c64>> = None;
+        let mut reflection: Option<Mat<c64>> = None;
+        let mut interfaces: Vec<Interface> = Vec::with_capacity(self.layers.len() + 1);
+        for (thickness_um, basis) in self.layers.iter().rev() {
+            let above = match basis {
+                LayerBasis::Homogeneous(eps) => homogeneous(&self.kx, ky, *eps),
+                LayerBasis::Lamellar(l) => l.modes(&self.kx, ky),
+            };
+            let (sum_lu, diff) = match_interface(&above, &below, reflection.as_ref(), dim);
+            // R at the layer's bottom, (A - B)(A + B)^-1, carried up by X R X.
+            let r_bottom = sum_lu
+                .solve_transpose(diff.transpose())
+                .transpose()
+                .to_owned();
+            let d = self.k0 * thickness_um;
+            let x: Vec<c64> = above
+                .gamma
+                .iter()
+                .map(|&g| (c64::new(0.0, d) * g).exp())
+                .collect();
+            reflection = Some(Mat::from_fn(dim, dim, |r, c| {
+                x[r] * r_bottom[(r, c)] * x[c]
+            }));
+            interfaces.push(Interface {
+                sum: sum_lu,
+                phase_below,
+            });
+            phase_below = Some(x);
+            below = above;
+        }
+        let superstrate = homogeneous(&self.kx, ky, c64::new(n1 * n1, 0.0));
+        let (sum_lu, diff) = match_interface(&superstrate, &below, reflection.as_ref(), dim);
+        interfaces.push(Interface {
+            sum: sum_lu,
+            phase_below,
+        });
+
+        // Incident plane wave (unit amplitude, both polarisations as columns).
+        let kz_inc = (n1 * n1 - kx0 * kx0 - ky * ky).max(0.0).sqrt();
+        let k_inc = [kx0 / n1, ky / n1, kz_inc / n1];
+        let (s_inc, p_inc) = basis(k_inc);
+        let mut incident = Mat::<c64>::zeros(dim, 2);
+        for (col, e) in [s_inc, p_inc].iter().enumerate() {
+            incident[(self.n_orders, col)] = c64::new(e[0], 0.0);
+            incident[(m + self.n_orders, col)] = c64::new(e[1], 0.0);
+        }
+        let top = interfaces.last().expect("the superstrate interface");
+        let y = top.sum.solve(&incident);
+        let reflected_e = &diff * &y;
+        let reflected = self.outgoing(ky, &superstrate.gamma, &reflected_e, n1, -1.0, kz_inc);
+
+        // Downward pass for the transmitted field, where it can carry power.
+        let mut transmitted = Vec::new();
+        if self.substrate_eps.im == 0.0 && self.substrate_eps.re > 0.0 {
+            let mut forward = &y * faer::Scale(c64::new(2.0, 0.0));
+            let mut downward = interfaces.iter().rev();
+            let mut phase = downward.next().and_then(|top| top.phase_below.as_deref());
+            for interface in downward {
+                let x = phase.expect("a layer above every interface but the top one");
+                for c in 0..2 {
+                    for r in 0..dim {
+                        forward[(r, c)] *= x[r];
+                    }
+                }
+                forward = &interface.sum.solve(&forward) * faer::Scale(c64::new(2.0, 0.0));
+                phase = interface.phase_below.as_deref();
+            }
+            let n2 = self.substrate_eps.re.sqrt();
+            let substrate = homogeneous(&self.kx, ky, self.substrate_eps);
+            transmitted = self.outgoing(ky, &substrate.gamma, &forward, n2, 1.0, kz_inc);
+        }
+        Diffraction {
+            reflected,
+            transmitted,
+            n_orders: self.n_orders,
+        }
+    }
+
+    /// The propagating orders of an outgoing field whose tangential
+    /// amplitudes (Ex over the first m rows, Ey below) are `e`, in a medium
+    /// of real index `n`, travelling along `sign` z.
+    fn outgoing(
+        &self,
+        ky: f64,
+        gamma: &[c64],
+        e: &Mat<c64>,
+        n: f64,
+        sign: f64,
+        kz_incident: f64,
+    ) -> Vec<Order> {
+        let m = self.kx.len();
+        let mut out = Vec::new();
+        for (i, &kx) in self.kx.iter().enumerate() {
+            let kz = gamma[i];
+            if !(kx * kx + ky * ky < n * n) || kz.re <= 0.0 {
+                continue;
+            }
+            let kz = kz.re;
+            let k = [kx / n, ky / n, sign * kz / n];
+            let (s, p) = basis(k);
+            let flux = (kz / kz_incident).sqrt();
+            let mut jones = [[c64::new(0.0, 0.0); 2]; 2];
+            let mut efficiency = [0.0; 2];
+            for col in 0..2 {
+                let ex = e[(i, col)];
+                let ey = e[(m + i, col)];
+                // Transversality k . E = 0 gives E_z.
+                let ez = -(ex * kx + ey * ky) / (sign * kz);
+                let field = [ex, ey, ez];
+                for (row, basis_vector) in [s, p].iter().enumerate() {
+                    let a: c64 = (0..3).map(|j| field[j] * basis_vector[j]).sum();
+                    jones[row][col] = a * flux;
+                }
+                efficiency[col] =
+                    (kz / kz_incident) * field.iter().map(|f| f.norm_sqr()).sum::<f64>();
+            }
+            out.push(Order {
+                m: i as i64 - self.n_orders as i64,
+                direction: k,
+                efficiency,
+                jones,
+            });
+        }
+        out
+    }
+}
+
+/// Prepare `stack` at `lambda_nm` for incident light whose tangential
+/// wavevector has x component `kx_incident` (over k0: n1 sin(theta) cos(phi)),
+/// with 2N + 1 orders.
+pub fn prepare(
+    stack: &Stack,
+    lambda_nm: f64,
+    kx_incident: f64,
+    n_orders: usize,
+    rule: Factorisation,
+) -> Result<Prepared, StamError> {
+    stack.validate()?;
+    if !(lambda_nm > 0.0 && lambda_nm.is_finite()) {
+        return Err(StamError::new(format!(
+            "lambda_nm must be a positive wavelength, got {lambda_nm}"
+        )));
+    }
+    if n_orders > MAX_ORDERS {
+        return Err(StamError::new(format!(
+            "orders: at most {MAX_ORDERS} Fourier orders each side, got {n_orders}"
+        )));
+    }
+    let lambda_um = lambda_nm * 1e-3;
+    let grating_k = lambda_um / stack.period_um;
+    // Every propagating order must be among those retained.
+    let propagating = (stack.superstrate_index / grating_k).ceil();
+    if !(n_orders as f64 > propagating) {
+        return Err(StamError::new(format!(
+            "orders: N = {n_orders} retains fewer orders than the {} that propagate at \
+             {lambda_nm} nm with period_um {}; raise orders above {propagating}",
+            2.0 * propagating + 1.0,
+            stack.period_um
+        )));
+    }
+    let kx: Vec<f64> = (0..=2 * n_orders)
+        .map(|i| kx_incident + (i as f64 - n_orders as f64) * grating_k)
+        .collect();
+    let layers = stack
+        .layers
+        .iter()
+        .map(|layer| {
+            let basis = match layer.uniform_permittivity() {
+                Some(eps) => LayerBasis::Homogeneous(eps),
+                None => LayerBasis::Lamellar(Box::new(Lamellar::new(&kx, layer, rule)?)),
+            };
+            Ok((layer.thickness_um, basis))
+        })
+        .collect::<Result<Vec<_>, StamError>>()?;
+    Ok(Prepared {
+        n_orders,
+        kx,
+        k0: 2.0 * std::f64::consts::PI / lambda_um,
+        superstrate_index: stack.superstrate_index,
+        substrate_eps: stack.substrate_eps,
+        layers,
+    })
 }
 
 /// Solve the stack for both incident polarisations, with 2N + 1 orders.
@@ -281,13 +619,6 @@ pub fn solve_with(
     n_orders: usize,
     rule: Factorisation,
 ) -> Result<Diffraction, StamError> {
-    stack.validate()?;
-    if !(inc.lambda_nm > 0.0 && inc.lambda_nm.is_finite()) {
-        return Err(StamError::new(format!(
-            "lambda_nm must be a positive wavelength, got {}",
-            inc.lambda_nm
-        )));
-    }
     if !(inc.theta_rad >= 0.0 && inc.theta_rad < 0.5 * std::f64::consts::PI) {
         return Err(StamError::new(format!(
             "the incidence angle must be in [0, 90) degrees, got {} degrees",
@@ -297,146 +628,33 @@ pub fn solve_with(
     if !inc.phi_rad.is_finite() {
         return Err(StamError::new("the incidence azimuth must be finite"));
     }
-    if n_orders > MAX_ORDERS {
-        return Err(StamError::new(format!(
-            "orders: at most {MAX_ORDERS} Fourier orders each side, got {n_orders}"
-        )));
-    }
-    let lambda_um = inc.lambda_nm * 1e-3;
-    let k0 = 2.0 * std::f64::consts::PI / lambda_um;
     let n1 = stack.superstrate_index;
-    let (st, ct) = inc.theta_rad.sin_cos();
+    let st = inc.theta_rad.sin();
     let (sp, cp) = inc.phi_rad.sin_cos();
-    let grating_k = lambda_um / stack.period_um;
-    let orders = Orders {
-        n: n_orders,
-        kx: (0..=2 * n_orders)
-            .map(|i| n1 * st * cp + (i as f64 - n_orders as f64) * grating_k)
-            .collect(),
-        ky: n1 * st * sp,
-    };
-    let m = orders.size();
-    let dim = 2 * m;
-    let identity = Mat::<c64>::identity(dim, dim);
-
-    // Upward pass: the reflection matrix at the top of each medium.
-    let substrate = homogeneous(&orders, stack.substrate_eps);
-    let superstrate = homogeneous(&orders, c64::new(n1 * n1, 0.0));
-    let mut below = substrate;
-    let mut phase_below: Option<Vec<c64>> = None;
-    let mut reflection = Mat::<c64>::zeros(dim, dim);
-    let mut interfaces: Vec<Interface> = Vec::with_capacity(stack.layers.len() + 1);
-    let match_interface = |above: &Modes, below: &Modes, r: &Mat<c64>| {
-        // Fields continuous: W_a (u + b) = W_b (I + R) f, V_a (u - b) = V_b (I - R) f.
-        let plus = &identity + r;
-        let minus = &identity - r;
-        let wb = match &below.w {
-            Some(w) => w * &plus,
-            None => plus,
-        };
-        let a = match &above.w {
-            Some(w) => w.partial_piv_lu().solve(&wb),
-            None => wb,
-        };
-        let b = above.v.partial_piv_lu().solve(&below.v * &minus);
-        let sum = &a + &b;
-        let diff = &a - &b;
-        (sum.partial_piv_lu(), diff)
-    };
-    for layer in stack.layers.iter().rev() {
-        let above = modes(&orders, layer, rule)?;
-        let (sum_lu, diff) = match_interface(&above, &below, &reflection);
-        // R at the layer's bottom: (A - B)(A + B)^-1, then carried up by X R X.
-        let r_bottom = sum_lu
-            .solve_transpose(diff.transpose())
-            .transpose()
-            .to_owned();
-        let d = k0 * layer.thickness_um;
-        let x: Vec<c64> = above
-            .gamma
-            .iter()
-            .map(|&g| (c64::new(0.0, d) * g).exp())
-            .collect();
-        reflection = Mat::from_fn(dim, dim, |r, c| x[r] * r_bottom[(r, c)] * x[c]);
-        interfaces.push(Interface {
-            sum: sum_lu,
-            phase_below,
-        });
-        phase_below = Some(x);
-        below = above;
+    let prepared = prepare(stack, inc.lambda_nm, n1 * st * cp, n_orders, rule)?;
+    let d = prepared.solve(n1 * st * sp);
+    let finite = d
+        .reflected
+        .iter()
+        .chain(&d.transmitted)
+        .all(|o| o.efficiency.iter().all(|e| e.is_finite() && *e >= 0.0));
+    if !finite {
+        return Err(StamError::new(
+            "rigorous solver: no finite solution for this geometry (a degenerate \
+             or extreme structure); check period_um, the heights and the wavelength",
+        ));
     }
-    let (sum_lu, diff) = match_interface(&superstrate, &below, &reflection);
-    interfaces.push(Interface {
-        sum: sum_lu,
-        phase_below,
-    });
-
-    // Incident plane wave (unit amplitude, both polarisations as columns).
-    let k_inc = [st * cp, st * sp, ct];
-    let (s_inc, p_inc) = basis(k_inc, inc.phi_rad);
-    let centre = n_orders;
-    let mut incident = Mat::<c64>::zeros(dim, 2);
-    for (col, e) in [s_inc, p_inc].iter().enumerate() {
-        incident[(centre, col)] = c64::new(e[0], 0.0);
-        incident[(m + centre, col)] = c64::new(e[1], 0.0);
-    }
-    let top = interfaces.last().expect("the superstrate interface");
-    let y = top.sum.solve(&incident);
-    let reflected_e = &diff * &y;
-    let kz_inc = n1 * ct;
-    let reflected = outgoing(
-        &orders,
-        &superstrate.gamma,
-        &reflected_e,
-        n1,
-        -1.0,
-        kz_inc,
-        inc.phi_rad,
-    );
-
-    // Downward pass for the transmitted field, where it can carry power.
-    let mut transmitted = Vec::new();
-    if stack.substrate_eps.im == 0.0 && stack.substrate_eps.re > 0.0 {
-        let mut forward = &y * faer::Scale(c64::new(2.0, 0.0));
-        let mut downward = interfaces.iter().rev();
-        let mut phase = downward.next().and_then(|top| top.phase_below.as_deref());
-        for interface in downward {
-            let x = phase.expect("a layer above every interface but the top one");
-            for c in 0..2 {
-                for r in 0..dim {
-                    forward[(r, c)] *= x[r];
-                }
-            }
-            forward = &interface.sum.solve(&forward) * faer::Scale(c64::new(2.0, 0.0));
-            phase = interface.phase_below.as_deref();
-        }
-        let n2 = stack.substrate_eps.re.sqrt();
-        let substrate = homogeneous(&orders, stack.substrate_eps);
-        transmitted = outgoing(
-            &orders,
-            &substrate.gamma,
-            &forward,
-            n2,
-            1.0,
-            kz_inc,
-            inc.phi_rad,
-        );
-    }
-    Ok(Diffraction {
-        reflected,
-        transmitted,
-        n_orders: orders.n,
-    })
+    Ok(d)
 }
 
 /// s and p unit vectors of a direction k (s = z x k normalised, p = s x k),
-/// with s = (-sin phi, cos phi, 0) when k is along z.
-fn basis(k: [f64; 3], phi_fallback: f64) -> ([f64; 3], [f64; 3]) {
+/// with s along the grooves (y) when k is along z.
+fn basis(k: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let kt = (k[0] * k[0] + k[1] * k[1]).sqrt();
     let s = if kt > 1e-12 {
         [-k[1] / kt, k[0] / kt, 0.0]
     } else {
-        [-phi_fallback.sin(), phi_fallback.cos(), 0.0]
+        [0.0, 1.0, 0.0]
     };
     let p = [
         s[1] * k[2] - s[2] * k[1],
@@ -444,52 +662,4 @@ fn basis(k: [f64; 3], phi_fallback: f64) -> ([f64; 3], [f64; 3]) {
         s[0] * k[1] - s[1] * k[0],
     ];
     (s, p)
-}
-
-/// The propagating orders of an outgoing field whose tangential amplitudes
-/// (Ex over the first m rows, Ey below) are `e`, in a medium of real index
-/// `n`, travelling along `sign` z.
-fn outgoing(
-    orders: &Orders,
-    gamma: &[c64],
-    e: &Mat<c64>,
-    n: f64,
-    sign: f64,
-    kz_incident: f64,
-    phi: f64,
-) -> Vec<Order> {
-    let m = orders.size();
-    let ky = orders.ky;
-    let mut out = Vec::new();
-    for (i, &kx) in orders.kx.iter().enumerate() {
-        let kz = gamma[i];
-        if !(kx * kx + ky * ky < n * n) || kz.re <= 0.0 {
-            continue;
-        }
-        let kz = kz.re;
-        let k = [kx / n, ky / n, sign * kz / n];
-        let (s, p) = basis(k, phi);
-        let flux = (kz / kz_incident).sqrt();
-        let mut jones = [[c64::new(0.0, 0.0); 2]; 2];
-        let mut efficiency = [0.0; 2];
-        for col in 0..2 {
-            let ex = e[(i, col)];
-            let ey = e[(m + i, col)];
-            // Transversality k . E = 0 gives E_z.
-            let ez = -(ex * kx + ey * ky) / (sign * kz);
-            let field = [ex, ey, ez];
-            for (row, basis_vector) in [s, p].iter().enumerate() {
-                let a: c64 = (0..3).map(|j| field[j] * basis_vector[j]).sum();
-                jones[row][col] = a * flux;
-            }
-            efficiency[col] = (kz / kz_incident) * field.iter().map(|f| f.norm_sqr()).sum::<f64>();
-        }
-        out.push(Order {
-            m: i as i64 - orders.n as i64,
-            direction: k,
-            efficiency,
-            jones,
-        });
-    }
-    out
 }

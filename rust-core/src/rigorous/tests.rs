@@ -292,3 +292,193 @@ fn rayleigh_anomalies_sit_where_the_grating_equation_puts_them() {
     println!("anomaly at {anomaly_nm:.3} nm: TM0 slope below {slope_below:.2e}/nm, above {slope_above:.2e}/nm, 20 nm away {slope_away:.2e}/nm");
     assert!((slope_above - slope_below).abs() > 10.0 * slope_away.abs());
 }
+
+#[test]
+#[ignore = "measurement: cargo test -p stam-core --lib rigorous::tests::print_solve_time -- --ignored --nocapture --test-threads=1"]
+fn print_solve_time() {
+    let g = compact_disc();
+    let stack = g.stack(550.0, 1.0);
+    for n in [20, 25, 30, 40] {
+        let t = std::time::Instant::now();
+        let reps = 10;
+        for i in 0..reps {
+            let inc = Incidence {
+                lambda_nm: 550.0,
+                theta_rad: deg(10.0 + i as f64),
+                phi_rad: deg(20.0),
+            };
+            solve(&stack, &inc, n).unwrap();
+        }
+        let full = t.elapsed().as_secs_f64() / reps as f64;
+        let t = std::time::Instant::now();
+        let p = prepare(&stack, 550.0, 0.3, n, Factorisation::Li).unwrap();
+        let prep = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        for i in 0..reps {
+            p.solve(0.05 * i as f64);
+        }
+        let per_ky = t.elapsed().as_secs_f64() / reps as f64;
+        println!(
+            "N={n}: full solve {:.2} ms; prepare {:.2} ms + {:.2} ms per ky",
+            full * 1e3,
+            prep * 1e3,
+            per_ky * 1e3
+        );
+    }
+}
+
+fn small_spec(orders: usize) -> TableSpec {
+    TableSpec {
+        lambda_min_nm: 450.0,
+        lambda_max_nm: 650.0,
+        n_lambda: 3,
+        n_kx: 9,
+        n_ky: 5,
+        orders,
+        cover_eta: 1.0,
+    }
+}
+
+#[test]
+fn a_table_holds_the_solver_at_its_nodes_and_interpolates_between() {
+    let g = compact_disc();
+    let spec = small_spec(12);
+    let t = table::build(&g, &spec).unwrap();
+    let mut worst_node = 0.0f64;
+    for (il, ix, iy) in [(0, 4, 0), (1, 2, 3), (2, 6, 2), (1, 5, 1)] {
+        let (lambda, kx, ky) = (t.lambda_nm(il), t.kx(ix), t.ky(iy));
+        let p = prepare(&g.stack(lambda, 1.0), lambda, kx, 12, Factorisation::Li).unwrap();
+        let d = p.solve(ky);
+        for o in &d.reflected {
+            let diff = (t.at_node(il, ix, iy, o.m) - o.unpolarised()).abs();
+            worst_node = worst_node.max(diff);
+            // The same value through the interpolating lookup, and at -ky.
+            assert!((t.efficiency(lambda, kx, -ky, o.m) - t.at_node(il, ix, iy, o.m)).abs() < 1e-6);
+        }
+    }
+    println!("largest difference at nodes {worst_node:.1e}");
+    assert!(worst_node < 1e-6);
+    // Between nodes: a convex combination of the corners.
+    let (lo, hi) = (
+        t.at_node(1, 4, 1, 0).min(t.at_node(1, 5, 1, 0)),
+        t.at_node(1, 4, 1, 0).max(t.at_node(1, 5, 1, 0)),
+    );
+    let mid = t.efficiency(t.lambda_nm(1), 0.5 * (t.kx(4) + t.kx(5)), t.ky(1), 0);
+    assert!(mid >= lo - 1e-7 && mid <= hi + 1e-7);
+    // A node outside the incidence disc holds the edge's value.
+    let edge = t.at_node(0, 8, 4, 0);
+    assert!(edge > 0.0, "grazing order 0 reflects: {edge}");
+}
+
+#[test]
+fn tables_are_kept_in_memory_and_on_disk() {
+    let dir = std::env::temp_dir().join(format!("stam-rigorous-cache-{}", std::process::id()));
+    std::env::set_var("STAM_CACHE_DIR", &dir);
+    let g = compact_disc();
+    let spec = small_spec(8);
+    let first = table::table(&g, &spec).unwrap();
+    let again = table::table(&g, &spec).unwrap();
+    assert!(std::sync::Arc::ptr_eq(&first, &again));
+    let key = table::table_key(&g, &spec);
+    let from_disk = table::table_from_disk(&key, &spec).expect("the table was written");
+    assert_eq!(from_disk.m_min, first.m_min);
+    for il in 0..3 {
+        for ix in 0..9 {
+            for iy in 0..5 {
+                for m in first.m_min..=first.m_max {
+                    assert_eq!(
+                        from_disk.at_node(il, ix, iy, m),
+                        first.at_node(il, ix, iy, m)
+                    );
+                }
+            }
+        }
+    }
+    // Another grating is another table.
+    let mut other = compact_disc();
+    other.period_um = 1.6;
+    assert_ne!(table::table_key(&other, &spec), key);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Interpolation error of a compact-disc table against direct solves at
+/// random incidences (same truncation), and its build time. Grid from
+/// STAM_TABLE="n_lambda,n_kx,n_ky,orders" (default 12,25,13,25).
+#[test]
+#[ignore = "measurement: STAM_TABLE=16,33,17,30 cargo test --release -p stam-core --lib rigorous::tests::print_table_accuracy -- --ignored --nocapture"]
+fn print_table_accuracy() {
+    let grid: Vec<usize> = std::env::var("STAM_TABLE")
+        .unwrap_or("12,25,13,25".into())
+        .split(',')
+        .map(|x| x.trim().parse().unwrap())
+        .collect();
+    let spec = TableSpec {
+        lambda_min_nm: 380.0,
+        lambda_max_nm: 780.0,
+        n_lambda: grid[0],
+        n_kx: grid[1],
+        n_ky: grid[2],
+        orders: grid[3],
+        cover_eta: 1.0,
+    };
+    let g = compact_disc();
+    let t = table::build(&g, &spec).unwrap();
+    let mut rng = 0x2545F4914F6CDD1Du64;
+    let mut uniform = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut worst, mut sum2, mut count, mut worst_total) = (0.0f64, 0.0, 0usize, 0.0f64);
+    // Worst error by distance (in |k_t| / k0) to the nearest Rayleigh anomaly.
+    let mut by_distance = [0.0f64; 4];
+    for _ in 0..150 {
+        let lambda = 380.0 + 400.0 * uniform();
+        let theta = (80.0 * uniform()).to_radians();
+        let phi = (180.0 * uniform()).to_radians();
+        let (kx, ky) = (theta.sin() * phi.cos(), theta.sin() * phi.sin());
+        let d = prepare(
+            &g.stack(lambda, 1.0),
+            lambda,
+            kx,
+            spec.orders,
+            Factorisation::Li,
+        )
+        .unwrap()
+        .solve(ky);
+        let mut total = 0.0;
+        let mut total_table = 0.0;
+        for o in &d.reflected {
+            let e = (t.efficiency(lambda, kx, ky, o.m) - o.unpolarised()).abs();
+            worst = worst.max(e);
+            sum2 += e * e;
+            count += 1;
+            total += o.unpolarised();
+        }
+        for m in t.m_min..=t.m_max {
+            total_table += t.efficiency(lambda, kx, ky, m);
+        }
+        worst_total = worst_total.max((total - total_table).abs());
+        let step = lambda * 1e-3 / g.period_um;
+        let distance = (-20..=20)
+            .map(|n| (((kx + n as f64 * step).powi(2) + ky * ky).sqrt() - 1.0).abs())
+            .fold(f64::INFINITY, f64::min);
+        let bin = [0.01, 0.03, 0.1, f64::INFINITY]
+            .iter()
+            .position(|&b| distance < b)
+            .unwrap();
+        for o in &d.reflected {
+            let e = (t.efficiency(lambda, kx, ky, o.m) - o.unpolarised()).abs();
+            by_distance[bin] = by_distance[bin].max(e);
+        }
+    }
+    println!("worst per-order error by distance to an anomaly (<0.01, <0.03, <0.1, beyond): {by_distance:.4?}");
+    println!(
+        "grid {grid:?}: build {:.1} s ({} threads), {} kB; per-order error max {worst:.4} rms {:.4}; total max {worst_total:.4}",
+        t.build_seconds,
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+        t.memory_bytes() / 1024,
+        (sum2 / count as f64).sqrt()
+    );
+}

@@ -337,6 +337,23 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
               "parameter reference");
     }
 
+    /* Rigorous efficiencies: an answer for a grating, a message naming the
+     * bad key otherwise; the answer is freed by stam_text_free. */
+    {
+        char *answer = stam_rigorous_solve(
+            "{\"period_um\":1,\"profile\":\"rect\",\"height_um\":1,\"width_um\":0.5,"
+            "\"fresnel\":{\"eta\":0.22,\"k\":6.71},\"lambda_nm\":1000,\"theta_deg\":30,"
+            "\"orders\":10}",
+            err, sizeof err);
+        CHECK(55, answer != NULL && strstr(answer, "\"reflected\"") != NULL && err[0] == '\0',
+              "rigorous solve: %s", answer ? answer : err);
+        stam_text_free(answer);
+        answer = stam_rigorous_solve("{\"period_um\":-1}", err, sizeof err);
+        CHECK(56, answer == NULL && strstr(err, "period_um") != NULL,
+              "a bad rigorous request is refused by name: %s", err);
+        stam_text_free(NULL);
+    }
+
     /* NULL material: zeros, no crash. */
     stam_brdf_eval_spectral(NULL, N, wi, wo, lambda, out);
     CHECK(21, out[0] == 0.0f, "NULL material must give 0");

@@ -203,6 +203,14 @@ mod tests {
             h::stam_version as unsafe extern "C" fn() -> _,
             ffi::stam_version as unsafe extern "C" fn() -> _,
         );
+        same_signature(
+            h::stam_rigorous_solve as unsafe extern "C" fn(_, _, _) -> _,
+            ffi::stam_rigorous_solve as unsafe extern "C" fn(_, _, _) -> _,
+        );
+        same_signature(
+            h::stam_text_free as unsafe extern "C" fn(_),
+            ffi::stam_text_free as unsafe extern "C" fn(_),
+        );
         assert_eq!(h::STAM_FLAG_HAS_COHERENT, stam::material::FLAG_HAS_COHERENT);
         assert_eq!(h::STAM_FLAG_ANISOTROPIC, stam::material::FLAG_ANISOTROPIC);
         assert_eq!(

@@ -317,6 +317,10 @@ pub fn run(options: &Options) -> Report {
         report.bad_params_json += 1;
         report.fail("stam_parameter_reference: NULL, not UTF-8 or not its JSON".to_string());
     }
+    if let Err(message) = rigorous_answers() {
+        report.bad_params_json += 1;
+        report.fail(format!("stam_rigorous_solve: {message}"));
+    }
     let mut rng = Rng::new(options.seed);
     let mut kind = 0usize;
     let mut spectral_outputs = 0u64;
@@ -890,4 +894,46 @@ fn check_sample(
             "{w}: sampled wo {wo:?} pdf {pdf} coherent {coherent}"
         ));
     }
+}
+
+/// stam_rigorous_solve answers a grating with efficiencies in [0, 1] that
+/// sum to at most 1 (an absorbing metal), and refuses bad input by name.
+fn rigorous_answers() -> Result<(), String> {
+    let request = c"{\"period_um\":1.6,\"profile\":\"sine\",\"height_um\":0.12,\"slices\":4,\"fresnel\":\"aluminium\",\"lambda_nm\":550,\"theta_deg\":30,\"phi_deg\":20,\"orders\":8}";
+    let mut err = [0 as std::ffi::c_char; 256];
+    let answer = unsafe { ffi::stam_rigorous_solve(request.as_ptr(), err.as_mut_ptr(), err.len()) };
+    if answer.is_null() {
+        return Err("a valid request was refused".to_string());
+    }
+    let text = unsafe { std::ffi::CStr::from_ptr(answer) }
+        .to_str()
+        .map(str::to_string);
+    unsafe { ffi::stam_text_free(answer) };
+    let value: serde_json::Value = text
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .ok_or("the answer is not UTF-8 JSON")?;
+    let mut total = [0.0f64; 2];
+    for order in value["reflected"].as_array().ok_or("no reflected orders")? {
+        for (pol, sum) in total.iter_mut().enumerate() {
+            let e = order["efficiency"][pol]
+                .as_f64()
+                .ok_or("an efficiency is not a number")?;
+            if !(0.0..=1.0).contains(&e) {
+                return Err(format!("efficiency {e} outside [0, 1]"));
+            }
+            *sum += e;
+        }
+    }
+    if total.iter().any(|&t| !(t > 0.0 && t <= 1.0)) {
+        return Err(format!("total reflectance {total:?} outside (0, 1]"));
+    }
+    let bad = unsafe { ffi::stam_rigorous_solve(c"{}".as_ptr(), err.as_mut_ptr(), err.len()) };
+    let message = unsafe { std::ffi::CStr::from_ptr(err.as_ptr()) }.to_string_lossy();
+    if !bad.is_null() || !message.contains("period_um") {
+        return Err(format!(
+            "an empty request was not refused by name: {message}"
+        ));
+    }
+    Ok(())
 }

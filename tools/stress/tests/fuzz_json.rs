@@ -317,6 +317,51 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
         if !parsed.is_some_and(|v| v["surfaces"].is_array()) {
             return Err("stam_parameter_reference is not the reference's JSON".to_string());
         }
+        rigorous_request(&at)?;
+    }
+    Ok(())
+}
+
+/// stam_rigorous_solve on a rect grating made of the fuzzed floats: refused
+/// with a message, or finite efficiencies >= 0.
+unsafe fn rigorous_request(at: &dyn Fn(usize) -> f32) -> Result<(), String> {
+    use stam::ffi::*;
+    // NaN and Inf become null, which is refused by name.
+    let request = serde_json::json!({
+        "period_um": at(0), "profile": "rect", "height_um": at(1), "width_um": at(2),
+        "fresnel": {"eta": at(3), "k": at(4)}, "lambda_nm": at(5), "theta_deg": at(6),
+        "phi_deg": at(7), "orders": (at(8).abs() as usize).min(6),
+    });
+    let request = std::ffi::CString::new(request.to_string()).unwrap();
+    let mut err = [0 as std::ffi::c_char; 256];
+    let answer = stam_rigorous_solve(request.as_ptr(), err.as_mut_ptr(), err.len());
+    if answer.is_null() {
+        let message = std::ffi::CStr::from_ptr(err.as_ptr()).to_string_lossy();
+        if message.is_empty() || message.contains("internal error") {
+            return Err(format!(
+                "stam_rigorous_solve refused without a message or panicked: {message}"
+            ));
+        }
+        return Ok(());
+    }
+    let text = std::ffi::CStr::from_ptr(answer)
+        .to_str()
+        .map(str::to_string);
+    stam_text_free(answer);
+    let value: serde_json::Value = text
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .ok_or("stam_rigorous_solve: the answer is not UTF-8 JSON")?;
+    for order in value["reflected"]
+        .as_array()
+        .ok_or("stam_rigorous_solve: no reflected orders")?
+    {
+        for pol in 0..2 {
+            let e = order["efficiency"][pol].as_f64().unwrap_or(f64::NAN);
+            if !(e.is_finite() && e >= 0.0) {
+                return Err(format!("stam_rigorous_solve: efficiency {e}"));
+            }
+        }
     }
     Ok(())
 }
