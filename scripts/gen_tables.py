@@ -4,7 +4,7 @@
 Run from the repository root with the project venv (colour-science, numpy,
 mitsuba 3.9.1):
 
-    /work/main/.venv/bin/python scripts/gen_tables.py
+    .venv/bin/python scripts/gen_tables.py
 
 Writes
   rust-core/src/spectrum/cie_tables.rs  CIE 1931 2-degree CMFs and CIE D65 at 1 nm,
