@@ -5,11 +5,18 @@
 //! an on-disk cache (keyed by the grating, the grid and `SOLVER_VERSION`).
 //!
 //! Efficiencies do not change under ky -> -ky (the grating is invariant
-//! along y), so the table covers ky >= 0. One eigen-decomposition per
-//! (wavelength, kx) serves every ky (`solver::Prepared`). Nodes outside the
-//! disc kx^2 + ky^2 < n1^2 (no incident direction reaches them) hold the
-//! values at the disc's edge along the same azimuth, so that interpolation
-//! near grazing incidence reads physical values.
+//! along y), so the table covers ky >= 0. Rows are (wavelength, kx) on a
+//! uniform grid; one eigen-decomposition per row serves every ky
+//! (`solver::Prepared`). Efficiencies have kinks (and, in p, resonances) at
+//! the Rayleigh anomalies, where an order m grazes:
+//! ky_m = sqrt(n1^2 - (kx + m lambda / Lam)^2). A row's ky nodes are placed
+//! on these anomalies (its breakpoints, from 0 up to ky_0, the edge of the
+//! incidence disc) and `nodes_per_gap` - 1 more between each two, spaced
+//! as 1 - cos, dense next to the anomalies where efficiencies go as a square
+//! root. A lookup interpolates along each neighbouring row at the same
+//! place relative to the query's own anomalies (the fraction of the way
+//! between the same two orders' breakpoints), so a kink stays a kink
+//! instead of being smeared over a grid cell.
 
 use std::collections::HashMap;
 use std::io::{Read, Write};
@@ -31,27 +38,88 @@ pub struct TableSpec {
     pub lambda_min_nm: f64,
     pub lambda_max_nm: f64,
     pub n_lambda: usize,
-    /// Nodes over kx in [-n1, n1].
+    /// Rows over kx in [-n1, n1].
     pub n_kx: usize,
-    /// Nodes over ky in [0, n1].
-    pub n_ky: usize,
+    /// ky nodes from one anomaly to the next in a row (>= 1).
+    pub nodes_per_gap: usize,
     /// Fourier orders -N..N of the solver.
     pub orders: usize,
     /// Index of the incidence medium.
     pub cover_eta: f64,
 }
 
-/// Unpolarised efficiencies of orders m_min..=m_max on the grid; zero where
-/// an order does not propagate.
+/// One (wavelength, kx) row: efficiencies at ky nodes.
+#[derive(Clone, Debug)]
+struct Row {
+    ky: Vec<f64>,
+    /// [node][m - m_min].
+    values: Vec<f32>,
+}
+
+/// Unpolarised efficiencies of orders m_min..=m_max; zero where an order
+/// does not propagate.
 #[derive(Clone, Debug)]
 pub struct EfficiencyTable {
     pub spec: TableSpec,
     pub m_min: i64,
     pub m_max: i64,
-    /// [lambda][kx][ky][m - m_min].
-    values: Vec<f32>,
+    period_um: f64,
+    /// [lambda][kx].
+    rows: Vec<Row>,
     /// Seconds the build took (0 when read from the disk cache).
     pub build_seconds: f64,
+}
+
+/// The anomalies of a row up to the incidence disc's edge, ascending in ky:
+/// (ky, the orders grazing there); the first is (0, []), the last
+/// (ky_0, [0, ...]).
+fn breakpoints(lambda_nm: f64, period_um: f64, kx: f64, n1: f64) -> Vec<(f64, Vec<i64>)> {
+    let step = lambda_nm * 1e-3 / period_um;
+    let reach = (2.0 * n1 / step).ceil() as i64 + 1;
+    // Beyond the disc's edge ky_0 no light arrives: anomalies there do not count.
+    let edge = (n1 * n1 - kx * kx).max(0.0).sqrt();
+    let mut points: Vec<(f64, Vec<i64>)> = vec![(0.0, Vec::new())];
+    for m in -reach..=reach {
+        let k = kx + m as f64 * step;
+        if k.abs() < n1 {
+            let ky = (n1 * n1 - k * k).sqrt();
+            if ky <= edge {
+                points.push((ky, vec![m]));
+            }
+        }
+    }
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Merge anomalies closer than 1e-9 (orders +-m at kx = 0, say).
+    let mut merged: Vec<(f64, Vec<i64>)> = Vec::with_capacity(points.len());
+    for (ky, ms) in points {
+        match merged.last_mut() {
+            Some(last) if ky - last.0 < 1e-9 => last.1.extend(ms),
+            _ => merged.push((ky, ms)),
+        }
+    }
+    merged
+}
+
+/// ky nodes of a row: `per_gap` per gap between breakpoints, 1 - cos spaced,
+/// a hair inside each gap's ends (an order exactly grazing is a limit).
+fn row_nodes(points: &[(f64, Vec<i64>)], per_gap: usize) -> Vec<f64> {
+    let mut nodes = Vec::new();
+    for pair in points.windows(2) {
+        let (a, b) = (pair[0].0, pair[1].0);
+        let margin = 1e-12 * (b - a);
+        for l in 0..=per_gap {
+            if l == 0 && !nodes.is_empty() {
+                continue;
+            }
+            let t = 0.5 * (1.0 - (std::f64::consts::PI * l as f64 / per_gap as f64).cos());
+            let y = a + (b - a) * t;
+            nodes.push(y.clamp(
+                a + if pair[0].1.is_empty() { 0.0 } else { margin },
+                b - margin,
+            ));
+        }
+    }
+    nodes
 }
 
 fn node(min: f64, max: f64, n: usize, i: usize) -> f64 {
@@ -72,38 +140,88 @@ impl EfficiencyTable {
         node(-self.spec.cover_eta, self.spec.cover_eta, self.spec.n_kx, i)
     }
 
-    pub fn ky(&self, i: usize) -> f64 {
-        node(0.0, self.spec.cover_eta, self.spec.n_ky, i)
-    }
-
     fn orders(&self) -> usize {
         (self.m_max - self.m_min + 1) as usize
     }
 
-    fn index(&self, il: usize, ix: usize, iy: usize) -> usize {
-        ((il * self.spec.n_kx + ix) * self.spec.n_ky + iy) * self.orders()
+    fn row(&self, il: usize, ix: usize) -> &Row {
+        &self.rows[il * self.spec.n_kx + ix]
     }
 
-    /// Memory held by the values.
+    /// The ky nodes of row (il, ix).
+    pub fn ky_nodes(&self, il: usize, ix: usize) -> &[f64] {
+        &self.row(il, ix).ky
+    }
+
+    /// Memory held by the values and nodes.
     pub fn memory_bytes(&self) -> usize {
-        self.values.len() * 4
+        self.rows
+            .iter()
+            .map(|r| r.values.len() * 4 + r.ky.len() * 8)
+            .sum()
     }
 
-    /// Efficiency of order m at a node.
+    /// Efficiency of order m at node `iy` of row (il, ix).
     pub fn at_node(&self, il: usize, ix: usize, iy: usize, m: i64) -> f64 {
         if m < self.m_min || m > self.m_max {
             return 0.0;
         }
-        self.values[self.index(il, ix, iy) + (m - self.m_min) as usize] as f64
+        self.row(il, ix).values[iy * self.orders() + (m - self.m_min) as usize] as f64
     }
 
-    /// Efficiency of order m at (lambda, kx, ky), trilinear between nodes
-    /// (clamped to the grid).
+    /// The kx at which row ix was solved (just inside the disc at its ends).
+    fn row_kx(&self, ix: usize) -> f64 {
+        let n1 = self.spec.cover_eta;
+        self.kx(ix).clamp(-0.9995 * n1, 0.9995 * n1)
+    }
+
+    /// Order m along row (il, ix) at `ky`: linear in the nodes' parameter u
+    /// (ky = a + (b - a)(1 - cos pi u) / 2 within the gap (a, b)), in which a
+    /// square root at an anomaly is a straight line.
+    fn along_row(&self, il: usize, ix: usize, ky: f64, k: usize) -> f64 {
+        let row = self.row(il, ix);
+        let n = row.ky.len();
+        if n == 0 {
+            return 0.0;
+        }
+        let orders = self.orders();
+        let at = |i: usize| row.values[i * orders + k] as f64;
+        let points = breakpoints(
+            self.lambda_nm(il),
+            self.period_um,
+            self.row_kx(ix),
+            self.spec.cover_eta,
+        );
+        let per_gap = self.spec.nodes_per_gap;
+        if points.len() < 2 || (points.len() - 1) * per_gap + 1 != n {
+            return at(0);
+        }
+        let g = points
+            .partition_point(|p| p.0 <= ky)
+            .clamp(1, points.len() - 1)
+            - 1;
+        let (a, b) = (points[g].0, points[g + 1].0);
+        let t = if b > a {
+            ((ky - a) / (b - a)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let x = (g as f64 + (1.0 - 2.0 * t).acos() / std::f64::consts::PI) * per_gap as f64;
+        let i = (x.floor() as usize).min(n - 2);
+        let w = x - i as f64;
+        at(i) + w * (at(i + 1) - at(i))
+    }
+
+    /// Efficiency of order m at (lambda, kx, ky): bilinear over the four
+    /// rows around (lambda, kx), each read at the query's place between its
+    /// two neighbouring anomalies (see the module comment).
     pub fn efficiency(&self, lambda_nm: f64, kx: f64, ky: f64, m: i64) -> f64 {
         if m < self.m_min || m > self.m_max {
             return 0.0;
         }
         let s = &self.spec;
+        let n1 = s.cover_eta;
+        let ky = ky.abs();
         let cell = |x: f64, min: f64, max: f64, n: usize| -> (usize, f64) {
             if n < 2 {
                 return (0, 0.0);
@@ -113,19 +231,43 @@ impl EfficiencyTable {
             (i, t - i as f64)
         };
         let (il, tl) = cell(lambda_nm, s.lambda_min_nm, s.lambda_max_nm, s.n_lambda);
-        let (ix, tx) = cell(kx, -s.cover_eta, s.cover_eta, s.n_kx);
-        let (iy, ty) = cell(ky.abs(), 0.0, s.cover_eta, s.n_ky);
+        let (ix, tx) = cell(kx, -n1, n1, s.n_kx);
         let step = |i: usize, n: usize| if n < 2 { 0 } else { (i + 1).min(n - 1) };
+        // The query's two neighbouring anomalies and its place between them.
+        let here = breakpoints(lambda_nm, self.period_um, kx, n1);
+        let j = here
+            .partition_point(|p| p.0 <= ky)
+            .clamp(1, here.len().max(2) - 1);
+        let (lo, hi) = (&here[j - 1], &here[j.min(here.len() - 1)]);
+        let t = if hi.0 > lo.0 {
+            ((ky - lo.0) / (hi.0 - lo.0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let k = (m - self.m_min) as usize;
         let mut sum = 0.0;
         for (jl, wl) in [(il, 1.0 - tl), (step(il, s.n_lambda), tl)] {
             for (jx, wx) in [(ix, 1.0 - tx), (step(ix, s.n_kx), tx)] {
-                for (jy, wy) in [(iy, 1.0 - ty), (step(iy, s.n_ky), ty)] {
-                    let w = wl * wx * wy;
-                    if w != 0.0 {
-                        sum += w * self.values[self.index(jl, jx, jy) + k] as f64;
-                    }
+                let w = wl * wx;
+                if w == 0.0 {
+                    continue;
                 }
+                let there = breakpoints(self.lambda_nm(jl), self.period_um, self.row_kx(jx), n1);
+                let find = |labels: &Vec<i64>| -> Option<f64> {
+                    if labels.is_empty() {
+                        return Some(0.0);
+                    }
+                    there
+                        .iter()
+                        .find(|p| p.1.iter().any(|l| labels.contains(l)))
+                        .map(|p| p.0)
+                };
+                // The same two anomalies in that row, else the same ky.
+                let ky_there = match (find(&lo.1), find(&hi.1)) {
+                    (Some(a), Some(b)) if b > a => a + t * (b - a),
+                    _ => ky,
+                };
+                sum += w * self.along_row(jl, jx, ky_there, k);
             }
         }
         sum
@@ -155,9 +297,9 @@ pub fn table_key(grating: &Grating, spec: &TableSpec) -> String {
 /// Build a table (all cores), printing progress to stderr when it takes
 /// more than a second.
 pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, StamError> {
-    if spec.n_lambda < 1 || spec.n_kx < 2 || spec.n_ky < 2 {
+    if spec.n_lambda < 1 || spec.n_kx < 2 || spec.nodes_per_gap < 1 {
         return Err(StamError::new(
-            "rigorous table: at least 1 wavelength, 2 kx and 2 ky nodes",
+            "rigorous table: at least 1 wavelength, 2 kx rows and 1 node per gap",
         ));
     }
     if !(spec.lambda_min_nm > 0.0 && spec.lambda_max_nm >= spec.lambda_min_nm) {
@@ -173,11 +315,10 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
         spec: spec.clone(),
         m_min: -m_reach,
         m_max: m_reach,
-        values: Vec::new(),
+        period_um: grating.period_um,
+        rows: Vec::new(),
         build_seconds: 0.0,
     };
-    let per_row = spec.n_ky * table.orders();
-    table.values = vec![0.0; spec.n_lambda * spec.n_kx * per_row];
     let rows: Vec<(usize, usize)> = (0..spec.n_lambda)
         .flat_map(|il| (0..spec.n_kx).map(move |ix| (il, ix)))
         .collect();
@@ -186,7 +327,7 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
     let last_report = Mutex::new(0.0f64);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, Vec<f32>)>> = Mutex::new(Vec::with_capacity(rows.len()));
+    let results: Mutex<Vec<(usize, Row)>> = Mutex::new(Vec::with_capacity(rows.len()));
     let first_error: Mutex<Option<StamError>> = Mutex::new(None);
     std::thread::scope(|scope| {
         for _ in 0..threads {
@@ -196,8 +337,8 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
                     break;
                 }
                 let (il, ix) = rows[r];
-                match row(grating, &table, il, ix) {
-                    Ok(values) => results.lock().unwrap().push((r, values)),
+                match solve_row(grating, &table, il, ix) {
+                    Ok(row) => results.lock().unwrap().push((r, row)),
                     Err(e) => {
                         *first_error.lock().unwrap() = Some(e);
                         break;
@@ -219,54 +360,45 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
     if let Some(e) = first_error.into_inner().unwrap() {
         return Err(e);
     }
-    for (r, values) in results.into_inner().unwrap() {
-        table.values[r * per_row..(r + 1) * per_row].copy_from_slice(&values);
-    }
+    let mut results = results.into_inner().unwrap();
+    results.sort_by_key(|(r, _)| *r);
+    table.rows = results.into_iter().map(|(_, row)| row).collect();
     table.build_seconds = start.elapsed().as_secs_f64();
     Ok(table)
 }
 
-/// One (wavelength, kx) row of the table: every ky node.
-fn row(
+/// One (wavelength, kx) row: every ky node up to the incidence disc's edge
+/// (a kx at or beyond the edge is read just inside it).
+fn solve_row(
     grating: &Grating,
     table: &EfficiencyTable,
     il: usize,
     ix: usize,
-) -> Result<Vec<f32>, StamError> {
+) -> Result<Row, StamError> {
     let spec = &table.spec;
     let n1 = spec.cover_eta;
     let lambda = table.lambda_nm(il);
-    let stack = grating.stack(lambda, n1);
-    let edge = 0.9995 * n1;
-    let kx = table.kx(ix);
+    let kx = table.kx(ix).clamp(-0.9995 * n1, 0.9995 * n1);
+    let points = breakpoints(lambda, grating.period_um, kx, n1);
+    let ky = row_nodes(&points, spec.nodes_per_gap);
     let orders = table.orders();
-    let mut out = vec![0.0f32; spec.n_ky * orders];
-    // Nodes beyond the disc's edge take the edge's values along their azimuth:
-    // group them by the kx they are moved to.
-    let mut prepared: Option<(f64, super::solver::Prepared)> = None;
-    for iy in 0..spec.n_ky {
-        let ky = table.ky(iy);
-        let r = (kx * kx + ky * ky).sqrt();
-        let (kx_at, ky_at) = if r > edge {
-            (kx * edge / r, ky * edge / r)
-        } else {
-            (kx, ky)
-        };
-        let reuse = matches!(&prepared, Some((k, _)) if *k == kx_at);
-        if !reuse {
-            prepared = Some((
-                kx_at,
-                prepare(&stack, lambda, kx_at, spec.orders, Factorisation::Li)?,
-            ));
-        }
-        let d = prepared.as_ref().expect("prepared above").1.solve(ky_at);
+    let mut values = vec![0.0f32; ky.len() * orders];
+    let prepared = prepare(
+        &grating.stack(lambda, n1),
+        lambda,
+        kx,
+        spec.orders,
+        Factorisation::Li,
+    )?;
+    for (iy, &y) in ky.iter().enumerate() {
+        let d = prepared.solve(y);
         for o in &d.reflected {
             if o.m >= table.m_min && o.m <= table.m_max {
-                out[iy * orders + (o.m - table.m_min) as usize] = o.unpolarised() as f32;
+                values[iy * orders + (o.m - table.m_min) as usize] = o.unpolarised() as f32;
             }
         }
     }
-    Ok(out)
+    Ok(Row { ky, values })
 }
 
 /// Where tables are kept between processes: $STAM_CACHE_DIR, else
@@ -298,14 +430,21 @@ fn write_cache(key: &str, table: &EfficiencyTable) -> std::io::Result<()> {
         return Ok(());
     };
     std::fs::create_dir_all(path.parent().expect("a file in the cache directory"))?;
-    let mut bytes = Vec::with_capacity(table.values.len() * 4 + key.len() + 32);
+    let mut bytes = Vec::new();
     bytes.extend_from_slice(&(key.len() as u64).to_le_bytes());
     bytes.extend_from_slice(key.as_bytes());
     bytes.extend_from_slice(&table.m_min.to_le_bytes());
     bytes.extend_from_slice(&table.m_max.to_le_bytes());
-    bytes.extend_from_slice(&(table.values.len() as u64).to_le_bytes());
-    for v in &table.values {
-        bytes.extend_from_slice(&v.to_le_bytes());
+    bytes.extend_from_slice(&table.period_um.to_le_bytes());
+    bytes.extend_from_slice(&(table.rows.len() as u64).to_le_bytes());
+    for row in &table.rows {
+        bytes.extend_from_slice(&(row.ky.len() as u64).to_le_bytes());
+        for y in &row.ky {
+            bytes.extend_from_slice(&y.to_le_bytes());
+        }
+        for v in &row.values {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
     }
     // Write then rename: a reader never sees half a file.
     let partial = path.with_extension(format!("{}.partial", std::process::id()));
@@ -332,21 +471,31 @@ pub fn table_from_disk(key: &str, spec: &TableSpec) -> Option<EfficiencyTable> {
     }
     let m_min = i64::from_le_bytes(take(8)?.try_into().ok()?);
     let m_max = i64::from_le_bytes(take(8)?.try_into().ok()?);
-    let n = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-    let expected = spec.n_lambda * spec.n_kx * spec.n_ky * (m_max - m_min + 1).max(0) as usize;
-    if n != expected {
+    let period_um = f64::from_le_bytes(take(8)?.try_into().ok()?);
+    let n_rows = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+    let orders = usize::try_from(m_max - m_min + 1).ok()?;
+    if n_rows != spec.n_lambda * spec.n_kx {
         return None;
     }
-    let raw = take(4 * n)?;
-    let values = raw
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-        .collect();
+    let mut rows = Vec::with_capacity(n_rows);
+    for _ in 0..n_rows {
+        let n = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+        let ky = take(8 * n)?
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect();
+        let values = take(4 * n * orders)?
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect();
+        rows.push(Row { ky, values });
+    }
     Some(EfficiencyTable {
         spec: spec.clone(),
         m_min,
         m_max,
-        values,
+        period_um,
+        rows,
         build_seconds: 0.0,
     })
 }
