@@ -80,8 +80,8 @@ fn find_python(root: &std::path::Path) -> Option<PathBuf> {
         return Some(PathBuf::from(p));
     }
     [root.join(".venv/bin/python")]
-    .into_iter()
-    .find(|p| p.exists())
+        .into_iter()
+        .find(|p| p.exists())
 }
 
 fn main() {
