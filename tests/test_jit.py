@@ -110,36 +110,75 @@ def programs(params, variant):
 
 
 def to_np(x):
+    # Evaluated first: converted in place, a Color3f's channels would be
+    # written at offsets n and 2n by the kernel that computes them
+    # (own(), below)
+    dr.eval(x)
     return np.array(x, dtype=np.float64)
 
 
+def own(x):
+    """x (a Dr.Jit array made from numpy arrays) evaluated in memory that
+    Dr.Jit allocated. A kernel then reads it as it reads any evaluated
+    array, in the same code whatever the number of lanes: converted in
+    place, a (3, n) array is gathered at offsets n and 2n, and a buffer
+    Dr.Jit maps may be unaligned, and either made the same method's kernel
+    differ from one test to the next (a cold run compiled the compact
+    disc's RGB eval three times). x * 1 with an opaque 1 is x, bit for
+    bit (NaN, infinities and -0 included)."""
+    x = x * dr.opaque(mi.Float, 1.0)
+    dr.eval(x)
+    return x
+
+
 def make_si(wi, wavelengths=WAVELENGTHS):
-    """Interactions with local frame = world (wi: (n, 3))."""
+    """Interactions with local frame = world (wi: (n, 3)); wi and the
+    wavelengths evaluated (own())."""
     wi = np.asarray(wi, dtype=np.float64)
     n = len(wi)
     si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = mi.Vector3f(wi.T)
+    si.wi = own(mi.Vector3f(wi.T))
     si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
     si.uv = mi.Point2f(0.5, 0.5)
     si.dp_du = mi.Vector3f(1, 0, 0)
     si.dp_dv = mi.Vector3f(0, 1, 0)
     if mi.is_spectral:
         lam = np.broadcast_to(np.asarray(wavelengths, dtype=np.float64), (n, 4))
-        si.wavelengths = mi.Spectrum([mi.Float(lam[:, j]) for j in range(4)])
+        si.wavelengths = own(mi.Spectrum([mi.Float(lam[:, j]) for j in range(4)]))
     return si
 
 
 class symbolic:
     """The BSDF behind a mi.BSDFPtr: its methods are recorded as a symbolic
     virtual call (Dr.Jit's default), as in a render. Holds the BSDF (a
-    BSDFPtr does not keep its instance alive)."""
+    BSDFPtr does not keep its instance alive).
 
-    def __init__(self, bsdf):
+    With `evaluated`, each method evaluates all its outputs at once, in one
+    kernel, from inputs in memory (own()): the kernel of a method is then
+    the same in every test of a material (of the same program code) and
+    variant, and a cold run compiles it once (Dr.Jit's kernel cache; the
+    BSDF's registry id is the same in each test, where use() freed the
+    earlier ones). Read one by one, the outputs of a call each traced and
+    compiled it again. Without, the outputs are traced and left to the
+    caller (a chi-square test reads a sample's direction and pdf, and its
+    kernel then leaves out the weight's eval)."""
+
+    def __init__(self, bsdf, evaluated=True):
         self.bsdf = bsdf
         self.ptr = mi.BSDFPtr(bsdf)
+        self.evaluated = evaluated
 
     def __getattr__(self, name):
-        return getattr(self.ptr, name)
+        method = getattr(self.ptr, name)
+        if not self.evaluated or name not in ('eval', 'pdf', 'eval_pdf', 'sample',
+                                              'eval_pdf_sample'):
+            return method
+
+        def evaluated(ctx, si, *args):
+            out = method(ctx, si, *[own(a) if dr.is_array_v(a) else a for a in args])
+            dr.eval(out)
+            return out
+        return evaluated
 
 
 def test_programs_for_the_built_values_run_while_the_parameters_are_those():

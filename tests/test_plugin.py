@@ -200,7 +200,14 @@ def density_adapter(bsdf, wi, ctx, wavelengths=None, uv=(0.5, 0.5)):
     weight: the test compares the sampling density with the pdf, and
     mi.chi2.BSDFAdapter drops zero-weight samples (directions where f = 0 but
     the defensive part of the strategy still samples, e.g. between the orders
-    of a grating), which the pdf rightly includes."""
+    of a grating), which the pdf rightly includes.
+
+    In JIT variants wi is put in memory (opaque): a literal wi made each
+    incidence's kernels differ, which a cold run compiled once per
+    incidence; in memory, the incidences of a material share them."""
+    if dr.is_jit_v(mi.Float):
+        wi = dr.opaque(mi.Vector3f, wi)
+
     def make_si_n(n):
         si = dr.zeros(mi.SurfaceInteraction3f, n)
         si.wi = wi
