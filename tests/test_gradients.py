@@ -24,6 +24,7 @@ stays covered by the other gradients here and by test_inverse.py.
 Run: make core plugin && .venv/bin/python -m pytest tests/test_gradients.py
 """
 
+import gc
 import os
 import sys
 
@@ -72,22 +73,38 @@ def mean_of(scene, params=None, seed=SEED):
 
 
 def check_gradients(bsdf, keys_steps):
-    """Reverse-mode AD along every key at once (one gradient pass, one
-    kernel) against each key's central difference by +-its step: {key: (x0,
-    fd, ad, values)}. Gratings with emitter samples only (the module's
-    docstring says why)."""
+    """Reverse-mode AD along every differentiable parameter of the material
+    at once (one gradient pass, one kernel) against each key's central
+    difference by +-its step: {key: (x0, fd, ad, values)}. Gratings with
+    emitter samples only (the module's docstring says why).
+
+    Every differentiable parameter carries a gradient in the pass, not
+    only the keys checked: the gradient kernel then depends on the
+    material's code alone, and the tests of one material family (the
+    isotropic Gaussian's sigma_um and corr_um, the anisotropic one's
+    correlation lengths and twist, eta and k, the fractal's sigma_um and
+    lag_um) share it, which a cold run compiles once instead of once per
+    key. A key's gradient is the same whichever others are
+    differentiated."""
     integrator = DIRECT if bsdf.get('surface') == 'periodic' else PRB
+    # The scenes of earlier tests freed: their BSDFs' registry ids would
+    # differ, and with them the kernels
+    gc.collect()
     scene = mi.load_dict(scene_dict(bsdf, integrator=integrator))
     params = mi.traverse(scene)
     full = {key: 'plate.bsdf.' + key for key, _ in keys_steps}
-    x0, v = {}, {}
     for key, name in full.items():
         assert name in params, sorted(params.keys())
         assert params.flags(name) & mi.ParamFlags.NonDifferentiable.value == 0, name
-        x0[key] = float(params[name][0])
-        v[key] = mi.Float(x0[key])
-        dr.enable_grad(v[key])
-        params[name] = v[key]
+    leaves = [k for k in params.keys() if k.startswith('plate.bsdf.')
+              and not params.flags(k) & mi.ParamFlags.NonDifferentiable.value]
+    x0 = {key: float(params[name][0]) for key, name in full.items()}
+    at = {name: float(params[name][0]) for name in leaves}
+    v = {}
+    for name in leaves:
+        v[name] = mi.Float(at[name])
+        dr.enable_grad(v[name])
+        params[name] = v[name]
     # reverse-mode AD of the render's mean (Mitsuba 3.9.1's prb cannot run
     # forward mode in spectral variants, with any BSDF). It comes first: a
     # parameter's first gradient rebuilds the material with its energy
@@ -99,9 +116,9 @@ def check_gradients(bsdf, keys_steps):
     # samples and no Monte Carlo noise separates them
     img = mi.render(scene, params=params, seed=1, seed_grad=SEED, spp=16)
     dr.backward(dr.mean(img, axis=None))
-    ad = {key: float(dr.grad(v[key])[0]) for key in full}
-    for key, name in full.items():
-        params[name] = mi.Float(x0[key])
+    ad = {key: float(dr.grad(v[name])[0]) for key, name in full.items()}
+    for name in leaves:
+        params[name] = mi.Float(at[name])
     out = {}
     for key, step in keys_steps:
         # finite difference: same seed, the parameter moved both ways
@@ -196,6 +213,21 @@ def test_parameters_the_programs_do_not_read_are_not_differentiable(variant):
 # below this share of the sum of the lanes' magnitudes
 REVERSE_FORWARD_TOL = 1e-3
 
+# The grating whose RGB programs reverse mode runs through in
+# test_gradients_are_finite_and_reverse_equals_forward: a rect of period
+# 1 um (plugin_periodic_rect's 2.5 um in forward mode only). Called directly
+# (not through a symbolic call), Dr.Jit's reverse mode compiles about three
+# kernels per region (symbolic if_stmt) of the program, each nearly the size
+# of the whole forward pass: the 2.5 um rect's RGB eval has 12 regions in
+# 8,634 instructions, and its reverse pass compiled 44 kernels (1.37 million
+# operations, 255 s of a cold run on 2 cores); the 1 um rect's has 6 regions
+# in 4,024 instructions, 24 kernels (0.34 million operations). Its regions
+# read the same parameters (period, height, width, coherence length) in the
+# same code, in which reverse mode came out 1,000-3,000 times too large
+# without program.h's broadcast of width-1 live-ins.
+RGB_REVERSE_RECT = {'surface': 'periodic', 'period_um': 1.0, 'profile': 'rect',
+                    'height_um': 0.15, 'width_um': 0.4, 'coherence_um': 5.0, 'energy': 'stam'}
+
 
 @pytest.mark.parametrize('variant', VARIANTS)
 def test_gradients_are_finite_and_reverse_equals_forward(variant):
@@ -209,8 +241,8 @@ def test_gradients_are_finite_and_reverse_equals_forward(variant):
       finite exactly when each one is (a NaN or an infinity stays one in
       the sum), and the material's kernel compiles once;
     - for the materials tagged 'plugin' (one per model, anisotropy and
-      profile, and the compact disc; in RGB of the gratings the rect
-      profile only), reverse mode equals forward mode,
+      profile, and the compact disc; in RGB of the gratings a rect,
+      RGB_REVERSE_RECT), reverse mode equals forward mode,
       parameter by parameter, summed over the 8,000 lanes: one reverse pass
       (every parameter a leaf), then the same forward kernel once per
       parameter (T_k = 1, the others 0: opaque, so no new kernel). Without
@@ -229,7 +261,9 @@ def test_gradients_are_finite_and_reverse_equals_forward(variant):
     mi_ = stam_mitsuba.setup(variant)
     wi, wo = test_jit.direction_pairs(8000, seed=3)
     checked, reversed_, failures = 0, 0, []
-    for e in stam_materials.load():
+    rgb_rect = {'name': 'rgb_reverse_rect', 'model': 'periodic', 'tags': ['plugin'],
+                'params': RGB_REVERSE_RECT}
+    for e in stam_materials.load() + ([rgb_rect] if variant.endswith('_rgb') else []):
         if e['model'] == 'periodic' and ('plugin' not in e['tags'] or (
                 e['name'] == 'cd' and variant.endswith('_rgb'))):
             continue
@@ -257,12 +291,12 @@ def test_gradients_are_finite_and_reverse_equals_forward(variant):
         assert np.all(np.isfinite(g)), (e['name'], keys, int(np.sum(~np.isfinite(g))))
         checked += len(keys)
         if 'plugin' not in e['tags'] or (variant.endswith('_rgb') and e['model'] == 'periodic'
-                                         and e['name'] != 'plugin_periodic_rect'):
+                                         and e is not rgb_rect):
             # The others differ from these in numbers only (a reverse
             # kernel each would double the test's compile time); of the
-            # gratings' RGB programs, whose reverse kernels take 3-4
-            # minutes each to compile cold, the rect's (it reads the
-            # period, height, width and coherence length in regions)
+            # gratings' RGB programs, whose reverse passes take minutes to
+            # compile cold, a rect's (it reads the period, height, width
+            # and coherence length in regions): RGB_REVERSE_RECT
             for k in keys:
                 params[k] = mi_.Float(values[k])
             params.update()
