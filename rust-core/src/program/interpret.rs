@@ -110,16 +110,25 @@ impl Program {
         regs.clear();
         regs.reserve(self.code.len());
         let flag = |m: bool| if m { T::one() } else { T::zero() };
-        // Inside a region this lane skips: until its EndIf, registers 0.
-        let mut skipping: Option<u32> = None;
-        for (i, ins) in self.code.iter().enumerate() {
-            if let Some(begin) = skipping {
-                if ins.op == Op::EndIf && ins.a == begin {
-                    skipping = None;
-                }
-                regs.push(T::zero());
+        let code = &self.code;
+        let mut i = 0;
+        while i < code.len() {
+            let ins = &code[i];
+            // A region this lane skips: its If, everything up to its EndIf
+            // (which names the If) and the EndIf are 0, without running
+            // them (a grating's programs skip most of their order regions
+            // on most lanes); with no EndIf, the rest of the program.
+            if ins.op == Op::If && !(regs[ins.a as usize] > T::zero()) {
+                let begin = i as u32;
+                let end = code[i + 1..]
+                    .iter()
+                    .position(|x| x.op == Op::EndIf && x.a == begin)
+                    .map_or(code.len(), |k| i + 1 + k + 1);
+                regs.resize(end, T::zero());
+                i = end;
                 continue;
             }
+            i += 1;
             let r = |i: u32| regs[i as usize];
             let v = match ins.op {
                 Op::Input => inputs[ins.a as usize],
@@ -167,13 +176,8 @@ impl Program {
                     };
                     T::from_f32(t.get(i).copied().unwrap_or(0.0))
                 }
-                Op::If => {
-                    if !(r(ins.a) > T::zero()) {
-                        skipping = Some(i as u32);
-                    }
-                    T::zero()
-                }
-                Op::EndIf => T::zero(),
+                // Taken (the lane skips it above); 0 as a register
+                Op::If | Op::EndIf => T::zero(),
             };
             regs.push(v);
         }
