@@ -149,6 +149,23 @@ Diffraction BSDF (:monosp:`diffraction`)
      derivative along it, which gradients then follow (``docs/inverse.md``). (Default:
      ``conserving``; ``stam`` with a ``sigma_um`` texture)
    - |exposed| (a string)
+ * - orders
+   - |string|
+   - Periodic surfaces: where each diffraction order's power comes from.
+     ``kirchhoff``: Stam's formula (scalar theory times Fresnel);
+     ``rigorous``: Maxwell's equations, each order's efficiency from the
+     core's rigorous solver, tabulated once per grating and metal (seconds,
+     kept on disk; ``docs/rigorous.md``). Rigorous orders need ``fresnel``
+     as a metal or ``eta``/``k``, conserve energy by themselves (no
+     ``energy``), and run in the scalar variants only for now.
+     (Default: ``kirchhoff``)
+   - |exposed| (a string)
+ * - fourier_orders
+   - |int|
+   - ``orders`` ``rigorous``: Fourier orders N each side that the solver
+     retains, an integer in [5, 200]. (Default: 25, more for periods above
+     2.5 um)
+   - |exposed|
  * - series_tolerance
    - |float|
    - Gaussian surfaces: relative truncation tolerance of the Poisson series

@@ -102,7 +102,8 @@ public:
         if (!missing.empty())
             throw ParamError("the core exports no program of kind " + missing +
                              " for this material, which the JIT variants run; render it "
-                             "in a scalar_* variant (please report the material)");
+                             "in a scalar_* variant (docs/parameters.md says which "
+                             "materials the JIT variants do not run yet)");
         return j;
     }
 

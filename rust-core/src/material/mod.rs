@@ -127,7 +127,10 @@ impl Brdf {
     pub fn new(params: MaterialParams) -> Result<Brdf, StamError> {
         let surface = Surface::new(&params.surface, &params.fresnel)?;
         let rgb_rule = RgbRule::new(params.surface.rgb_nodes(), &params.fresnel);
-        let energy = (params.energy == EnergyMode::Conserving).then(|| Energy {
+        // A model with its own f (rigorous gratings) conserves energy by
+        // itself: no table.
+        let conserving = params.energy == EnergyMode::Conserving && !surface.is_unfactored();
+        let energy = conserving.then(|| Energy {
             surface: params.surface.clone(),
             table: OnceLock::new(),
             derivatives: OnceLock::new(),
@@ -268,11 +271,28 @@ impl Brdf {
         lambda_nm: f64,
         fresnel: &FresnelAtCos,
     ) -> f64 {
+        if let Some(f) = self.unfactored(geom, lambda_nm) {
+            return f;
+        }
         let f = f_spectral(geom, lambda_nm, fresnel, |k| self.surface.kernel(k, geom));
         match self.energy_table() {
             Some(t) if f > 0.0 => f * t.pair_at(geom.wi, geom.wo, lambda_nm),
             _ => f,
         }
+    }
+
+    /// f of a model with its own (`SurfaceModel::is_unfactored`): 0 outside
+    /// the band, finite and non-negative; None for F^2 G K models.
+    #[inline]
+    fn unfactored(&self, geom: &PairGeometry, lambda_nm: f64) -> Option<f64> {
+        if !self.surface.is_unfactored() {
+            return None;
+        }
+        if !in_band(lambda_nm) {
+            return Some(0.0);
+        }
+        let f = self.surface.unfactored_spectral(geom, lambda_nm)?;
+        Some(finite_non_negative(f))
     }
 
     /// `eval_spectral_with` with the pair's energy scaling given (several
@@ -285,6 +305,9 @@ impl Brdf {
         fresnel: &FresnelAtCos,
         energy: &Option<PairEnergy>,
     ) -> f64 {
+        if let Some(f) = self.unfactored(geom, lambda_nm) {
+            return f;
+        }
         let f = f_spectral(geom, lambda_nm, fresnel, |k| self.surface.kernel(k, geom));
         match energy {
             Some(e) if f > 0.0 => f * e.at(lambda_nm),
@@ -311,6 +334,9 @@ impl Brdf {
         let Some(geom) = PairGeometry::new(wi, wo) else {
             return [0.0; 3];
         };
+        if let Some(rgb) = self.surface.unfactored_rgb(&geom) {
+            return gamut_map(rgb).map(finite_non_negative);
+        }
         let energy = self.pair_energy(geom.wi, geom.wo);
         let factor = energy.as_ref().map(|e| move |lambda: f64| e.at(lambda));
         let shading = self.shading_with(factor.as_ref().map(|f| f as &dyn Fn(f64) -> f64));

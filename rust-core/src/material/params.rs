@@ -68,8 +68,11 @@ impl MaterialParams {
         // table for, so its default is Stam's formula (docs/energy.md).
         let sigma_texture =
             matches!(&surface, SurfaceParams::Gaussian(g) if g.sigma_um_max.is_some());
+        // Rigorous gratings conserve energy by themselves (Maxwell's
+        // equations): no table to apply.
+        let rigorous = matches!(&surface, SurfaceParams::Periodic(p) if p.orders != crate::models::periodic::OrderPowers::Kirchhoff);
         let energy = match obj.get("energy") {
-            None if sigma_texture => EnergyMode::Stam,
+            None if sigma_texture || rigorous => EnergyMode::Stam,
             None => EnergyMode::Conserving,
             Some(Value::String(s)) if s == "conserving" => EnergyMode::Conserving,
             Some(Value::String(s)) if s == "stam" => EnergyMode::Stam,
@@ -83,6 +86,11 @@ impl MaterialParams {
             // The energy table is built for one sigma.
             return Err(err(
                 "parameter 'sigma_um_max' (a sigma texture) cannot be used with \"energy\": \"conserving\" (its table is built for one sigma); leave 'energy' out or set it to \"stam\"".to_string(),
+            ));
+        }
+        if energy == EnergyMode::Conserving && rigorous {
+            return Err(err(
+                "parameter 'energy' does not apply to \"orders\": \"rigorous\": Maxwell's equations conserve energy by themselves; leave 'energy' out".to_string(),
             ));
         }
         let gradients = parse_gradients(obj.get("gradients"))?;
@@ -348,6 +356,7 @@ mod tests {
                     width_um: CD_BUMP_WIDTH_UM
                 },
                 height_um_max: None,
+                orders: crate::models::periodic::OrderPowers::Kirchhoff,
             })
         );
         let cd = MaterialParams::from_json(
@@ -508,10 +517,11 @@ mod tests {
             ("fresnel", json!("aluminium")),
             ("energy", json!("conserving")),
             ("gradients", json!(false)),
+            ("orders", json!("kirchhoff")),
         ] {
             assert_eq!(cd.get(key), Some(&value), "{key}: {cd:?}");
         }
-        assert_eq!(cd.len(), 9, "{cd:?}");
+        assert_eq!(cd.len(), 10, "{cd:?}");
         // Defaults that follow other keys
         let cd = resolved(r#"{"surface":"cd","period_um":40}"#);
         assert_eq!(cd["coherence_um"], json!(60.0));
@@ -554,6 +564,9 @@ mod tests {
     /// its range (the keys it depends on set so that they do not refuse it).
     fn base_for(surface: &str, key: &str) -> Map<String, Value> {
         let v = match (surface, key) {
+            ("periodic", "fourier_orders") => json!({"surface": "periodic", "period_um": 1,
+                "coherence_um": 1e4, "profile": "sine", "height_um": 1e-12, "orders": "rigorous"}),
+            ("cd", "fourier_orders") => json!({"surface": "cd", "orders": "rigorous"}),
             ("gaussian", "corr_x_um" | "corr_y_um") => {
                 json!({"surface": "gaussian", "sigma_um": 1e-6, "corr_x_um": 2, "corr_y_um": 2})
             }

@@ -108,6 +108,11 @@ impl Brdf {
     /// for a conserving material (what tells which parameters the model's
     /// own part reads).
     fn program_with(&self, kind: ProgramKind, b: Builder, with_energy: bool) -> Option<Program> {
+        // A model with its own f (rigorous gratings) has no programs yet:
+        // the JIT variants refuse it, the scalar ones render it.
+        if self.surface.is_unfactored() {
+            return None;
+        }
         // Only the reflectance kinds scale by the energy table (sampling
         // and pdf follow Stam's strategy): the others build no table program
         // and no derivatives.

@@ -172,6 +172,25 @@ pub trait SurfaceModel: Sized + SurfacePrograms {
     /// functions (f / G in RGB), before gamut mapping.
     fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3];
 
+    /// Whether f is the model's own, not F^2 G K: a grating whose orders'
+    /// powers come from Maxwell's equations (`"orders": "rigorous"`), which
+    /// include the metal's reflection and conserve energy by themselves (the
+    /// material then applies no Fresnel term, no G and no energy table).
+    fn is_unfactored(&self) -> bool {
+        false
+    }
+
+    /// f itself (1/sr, without cos) at an in-band wavelength, where
+    /// `is_unfactored`; else None.
+    fn unfactored_spectral(&self, _geom: &PairGeometry, _lambda_nm: f64) -> Option<f64> {
+        None
+    }
+
+    /// f in linear sRGB before gamut mapping, where `is_unfactored`.
+    fn unfactored_rgb(&self, _geom: &PairGeometry) -> Option<[f64; 3]> {
+        None
+    }
+
     /// Reflectance of the coherent (mirror) lobe at incidence cosine cos_i
     /// (above the horizon) and an in-band wavelength; 0 for models without.
     fn coherent_spectral(&self, _shading: &Shading, _cos_i: f64, _lambda_nm: f64) -> f64 {
@@ -367,6 +386,19 @@ impl Surface {
     #[inline]
     pub fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
         dispatch!(self, Surface, m => m.reflectance_rgb(shading, geom))
+    }
+
+    pub fn is_unfactored(&self) -> bool {
+        dispatch!(self, Surface, m => m.is_unfactored())
+    }
+
+    #[inline]
+    pub fn unfactored_spectral(&self, geom: &PairGeometry, lambda_nm: f64) -> Option<f64> {
+        dispatch!(self, Surface, m => m.unfactored_spectral(geom, lambda_nm))
+    }
+
+    pub fn unfactored_rgb(&self, geom: &PairGeometry) -> Option<[f64; 3]> {
+        dispatch!(self, Surface, m => m.unfactored_rgb(geom))
     }
 
     /// The model's programs (`program::SurfacePrograms`).

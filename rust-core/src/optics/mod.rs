@@ -1,6 +1,6 @@
 //! Optics that knows no surface model: the geometry of a direction pair
 //! (`geometry`) and the Fresnel reflectance with its metals (`fresnel`,
-//! `metals`).
+//! `metals`), and a grating's profile (`profile`).
 
 pub mod fresnel;
 pub mod geometry;
@@ -9,5 +9,6 @@ pub mod geometry;
 pub mod metals;
 #[cfg(test)]
 mod param_tests;
+pub mod profile;
 /// The pair geometry and Fresnel lookups as program operations.
 pub mod program;

@@ -5,9 +5,9 @@
 
 use faer::{c64, Mat};
 
-use crate::models::periodic::Profile;
 use crate::optics::fresnel::metal_index;
 use crate::optics::metals::MetalTable;
+use crate::optics::profile::Profile;
 use crate::StamError;
 
 /// A medium's optical constants.

@@ -20,3 +20,16 @@ pub use solver::{
     prepare, solve, solve_with, Diffraction, Factorisation, Incidence, Order, Prepared, MAX_ORDERS,
 };
 pub use table::{EfficiencyTable, TableSpec};
+
+/// Fourier orders each side that a material's table retains for a grating
+/// of period `period_um`: 25 (converged to about 1e-3 per order on the
+/// compact disc, docs/rigorous.md), or the orders that propagate at the
+/// band's shortest wavelength (360 nm) plus 18 for longer periods.
+pub fn default_fourier_orders(period_um: f64) -> usize {
+    let propagating = (period_um / 0.36).ceil();
+    if propagating.is_finite() && propagating >= 0.0 {
+        (propagating as usize + 18).max(25)
+    } else {
+        MAX_ORDERS
+    }
+}

@@ -14,8 +14,8 @@ use serde_json::{json, Map, Value};
 
 use super::layers::{Grating, Medium};
 use super::solver::{solve_with, Diffraction, Factorisation, Incidence, Order};
-use crate::models::periodic::Profile;
 use crate::optics::fresnel::metal_by_name;
+use crate::optics::profile::Profile;
 use crate::StamError;
 
 fn number(obj: &Map<String, Value>, key: &str, default: Option<f64>) -> Result<f64, StamError> {

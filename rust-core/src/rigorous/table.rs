@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use super::layers::{Grating, Medium};
 use super::solver::{prepare, Factorisation};
-use crate::models::periodic::Profile;
+use crate::optics::profile::Profile;
 use crate::StamError;
 
 /// Bump when the solver's results change: it keys the on-disk cache.

@@ -1,8 +1,8 @@
 use faer::c64;
 
 use super::*;
-use crate::models::periodic::Profile;
 use crate::optics::fresnel::{conductor_reflectance, metal_by_name, metal_index};
+use crate::optics::profile::Profile;
 
 fn deg(d: f64) -> f64 {
     d.to_radians()

@@ -58,11 +58,17 @@ mod program_rgb;
 mod program_sampling;
 #[cfg(test)]
 mod program_tests;
+mod rgb;
+pub mod rigorous;
+#[cfg(test)]
+mod rigorous_tests;
 mod sampling;
 #[cfg(test)]
 mod tests;
 
-pub use params::PeriodicParams;
+pub use crate::optics::profile::Profile;
+pub use params::{OrderPowers, PeriodicParams};
+pub(crate) use rgb::OrderWeights;
 pub use sampling::Lobe;
 
 use crate::error::StamError;
@@ -70,7 +76,7 @@ use crate::models::{Shading, SurfaceModel, FLAG_ANISOTROPIC, FLAG_SPECTRALLY_VAR
 use crate::optics::fresnel::{Fresnel, NodeReflectance};
 use crate::optics::geometry::PairGeometry;
 use crate::sampling::{Component, Components};
-use crate::special::{fast_exp, fast_exp_vectorisable, sin_squared};
+use crate::special::{fast_exp, sin_squared};
 use hermite::quintic_hermite_basis;
 use num_complex::Complex64;
 use orders::{bessel_j_row, dft_coefficient, sine_table, tabulated_table};
@@ -93,6 +99,9 @@ pub struct Periodic {
     /// The spectral sampling programs' order weights over the incident
     /// direction and the wavelength, with its n_max (None: none made).
     spectral_orders: OnceLock<Option<(usize, Vec<f32>)>>,
+    /// `"orders": "rigorous"`: the orders' powers from Maxwell's equations
+    /// (rigorous.rs); None: Stam's formula.
+    rigorous: Option<rigorous::RigorousOrders>,
 }
 
 impl Periodic {
@@ -102,6 +111,15 @@ impl Periodic {
         if let Some(max) = p.height_um_max {
             surface = surface.with_height_texture(max).map_err(StamError::new)?;
         }
+        let rigorous = match p.orders {
+            OrderPowers::Kirchhoff => None,
+            OrderPowers::Rigorous { fourier_orders } => Some(rigorous::RigorousOrders::new(
+                p.period_um,
+                &p.profile,
+                fresnel,
+                fourier_orders,
+            )?),
+        };
         Ok(Periodic {
             surface,
             broad_reflectance: NodeReflectance::new(
@@ -111,7 +129,13 @@ impl Periodic {
             grating: OnceLock::new(),
             rgb_orders: OnceLock::new(),
             spectral_orders: OnceLock::new(),
+            rigorous,
         })
+    }
+
+    /// The rigorous orders of `"orders": "rigorous"` (None: Stam's formula).
+    pub fn rigorous(&self) -> Option<&rigorous::RigorousOrders> {
+        self.rigorous.as_ref()
     }
 
     pub fn surface(&self) -> &PeriodicSurface {
@@ -170,6 +194,7 @@ impl SurfaceModel for Periodic {
                 .get()
                 .and_then(|t| t.as_ref())
                 .map_or(0, |t| t.memory_bytes())
+            + self.rigorous.as_ref().map_or(0, |r| r.memory_bytes())
     }
 
     #[inline]
@@ -179,6 +204,28 @@ impl SurfaceModel for Periodic {
 
     fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
         self.reflectance_rgb_with(shading, geom, true)
+    }
+
+    fn is_unfactored(&self) -> bool {
+        self.rigorous.is_some()
+    }
+
+    fn unfactored_spectral(&self, geom: &PairGeometry, lambda_nm: f64) -> Option<f64> {
+        let r = self.rigorous.as_ref()?;
+        let eta = |n: i64| r.efficiency(n, lambda_nm, geom.wi, geom.wo);
+        Some(
+            self.surface
+                .kernel_given(2.0 * PI / (lambda_nm * 1e-3), geom, &eta),
+        )
+    }
+
+    fn unfactored_rgb(&self, geom: &PairGeometry) -> Option<[f64; 3]> {
+        let r = self.rigorous.as_ref()?;
+        let eta = |n: i64, lambda_nm: f64| r.efficiency(n, lambda_nm, geom.wi, geom.wo);
+        Some(
+            self.surface
+                .kernel_rgb_general(geom, OrderWeights::Given(&eta)),
+        )
     }
 
     /// Orders appear and disappear at the horizon as the wavelength
@@ -250,18 +297,6 @@ const RGB_PEAK_HALF_WIDTH_SIGMAS: f64 = 4.0;
 const RGB_BROAD_SIGMA: f64 = 0.1;
 /// RGB: node count of the smooth rule used for broad peaks.
 const RGB_SMOOTH_NODES: usize = 32;
-
-/// One period of the height profile (lengths in micrometres).
-#[derive(Clone, Debug, PartialEq)]
-pub enum Profile {
-    /// A bump of height `height_um` and width `width_um` in every period.
-    Rect { height_um: f64, width_um: f64 },
-    /// h(x) = (b/2) (1 + cos(2 pi x / Lam)), b = `height_um` (peak to valley).
-    Sine { height_um: f64 },
-    /// Uniform samples of one period, h_j = h(j Lam / N) (treated as samples,
-    /// see the module doc), N >= 2.
-    Tabulated { heights_um: Vec<f64> },
-}
 
 /// A periodic microsurface: profile, period and coherence length.
 #[derive(Clone, Debug)]
@@ -576,12 +611,43 @@ impl PeriodicSurface {
     /// The spectral kernel K(k) (BRDF without F^2 and G), 1/sr. Finite and
     /// >= 0 for every input; 0 for k <= 0 or a non-finite geometry.
     pub fn kernel(&self, k_per_um: f64, geom: &PairGeometry) -> f64 {
+        let beta = k_per_um * geom.w;
+        let s2 = self.rect_s2(beta);
+        let sum = self.gaussian_sum(k_per_um, geom, |n| self.power_fast(n, beta, s2));
+        let k = (k_per_um * self.coherence_um / geom.w).powi(2) / PI * sum;
+        if k.is_finite() && k > 0.0 {
+            k
+        } else {
+            0.0
+        }
+    }
+
+    /// f of a grating whose order n has the power `power(n)` (rigorous.rs):
+    /// each order's Gaussian normalised over the projected hemisphere,
+    /// sum_n power(n) (k^2 l^2 / pi) exp(-E_n). Finite and >= 0.
+    pub fn kernel_given(
+        &self,
+        k_per_um: f64,
+        geom: &PairGeometry,
+        power: &dyn Fn(i64) -> f64,
+    ) -> f64 {
+        let sum = self.gaussian_sum(k_per_um, geom, power);
+        let f = (k_per_um * self.coherence_um).powi(2) / PI * sum;
+        if f.is_finite() && f > 0.0 {
+            f
+        } else {
+            0.0
+        }
+    }
+
+    /// sum over the orders near the pair of power(n) exp(-E_n(k)) (see
+    /// `order_sum`); 0 for k <= 0 or a non-finite geometry.
+    fn gaussian_sum(&self, k_per_um: f64, geom: &PairGeometry, power: impl Fn(i64) -> f64) -> f64 {
         let (u, v, w) = (geom.u, geom.v, geom.w);
         if !(k_per_um > 0.0 && k_per_um.is_finite() && w < 0.0 && u.is_finite() && v.is_finite()) {
             return 0.0;
         }
-        let l = self.coherence_um;
-        let e_v = (l * k_per_um * v).powi(2);
+        let e_v = (self.coherence_um * k_per_um * v).powi(2);
         if !(e_v < EXP_UNDERFLOW) {
             return 0.0;
         }
@@ -589,14 +655,7 @@ impl PeriodicSurface {
         if lo > hi {
             return 0.0;
         }
-        let sum = self.order_sum(k_per_um, u, v, w, lo..=hi);
-        let prefactor = (k_per_um * l / w).powi(2) / PI;
-        let k = prefactor * sum;
-        if k.is_finite() && k > 0.0 {
-            k
-        } else {
-            0.0
-        }
+        self.order_sum(k_per_um, u, v, lo..=hi, power)
     }
 
     /// Table power for the kernels: orders filtered out of the table count
@@ -647,286 +706,31 @@ impl PeriodicSurface {
         }
     }
 
-    /// Linear-sRGB kernel: integral over the visible band of
-    /// reflectance(lambda_nm) K(lambda) W_c(lambda) d lambda. No fixed
-    /// wavelength grid (no banding). In wavenumber nu, order n's factor is
-    /// exp(-A_n) exp(-(nu - mu_n)^2 / (2 s^2)) with rho^2 = u^2 + v^2,
-    /// mu_n = u n / (Lam rho^2), s = 1 / (2 sqrt 2 pi l rho) and
-    /// A_n = 4 pi^2 l^2 n^2 v^2 / (Lam^2 rho^2). Per order:
-    /// - skipped if its exponent exceeds 40 everywhere in the band;
-    /// - s <= 0.1 /um: the rest S_n = R nu^2 |c_n(2 pi nu w)|^2 (times
-    ///   4 pi l^2 / w^2) is fitted by a quadratic through 3 evaluations
-    ///   (Gauss-Hermite nodes mu +- sqrt 3 s, moved inside the significant
-    ///   in-band part of the peak when it is cut by the band edge) and
-    ///   integrated against the Gaussian moments of W_c (`peak_moments`);
-    /// - s > 0.1 /um (order 0 near the mirror direction, short l): the whole
-    ///   term goes through the 32-node `spectrum::smooth_rule`.
-    ///
-    /// Measured (tests): max channel error / max channel below 3.1e-3 against
-    /// fine-grid references for the compact disc (l = 3.75..5000 um), a sine
-    /// and a tabulated grating, flat and gold-like reflectance. Channels can
-    /// be negative (sRGB matching functions have negative lobes); the result
-    /// is always finite.
-    pub fn kernel_rgb(&self, geom: &PairGeometry, reflectance: &dyn Fn(f64) -> f64) -> [f64; 3] {
-        let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
-        self.kernel_rgb_with(geom, reflectance, &|j| reflectance(rule.lambda_nm[j]))
-    }
-
-    /// The wavelengths of the rule for broad peaks (see `kernel_rgb`).
-    pub fn broad_rule_wavelengths() -> &'static [f64] {
-        &spectrum::smooth_rule(RGB_SMOOTH_NODES).lambda_nm
-    }
-
-    /// `kernel_rgb` with the reflectance at the broad rule's nodes given by
-    /// node index (`broad_rule_wavelengths`), which a caller may tabulate.
-    pub fn kernel_rgb_with(
-        &self,
-        geom: &PairGeometry,
-        reflectance: &dyn Fn(f64) -> f64,
-        node_reflectance: &dyn Fn(usize) -> f64,
-    ) -> [f64; 3] {
-        let mut out = [0.0; 3];
-        let (u, v, w) = (geom.u, geom.v, geom.w);
-        if !(w < 0.0 && u.is_finite() && v.is_finite()) {
-            return out;
-        }
-        let nu_lo = 1000.0 / spectrum::LAMBDA_MAX_NM;
-        let nu_hi = 1000.0 / spectrum::LAMBDA_MIN_NM;
-        let l = self.coherence_um;
-        let lam = self.period_um;
-        let two_pi_l = 2.0 * PI * l;
-        // exp(-4 pi^2 l^2 nu^2 v^2) <= its value at nu_lo for every order.
-        if (two_pi_l * nu_lo * v).powi(2) > RGB_TAIL_EXPONENT {
-            return out;
-        }
-        let rho2 = u * u + v * v;
-        let c_const = 4.0 * PI * l * l / (w * w);
-        let (n_lo, n_hi) = orders_in_band(u, lam, l, nu_lo, nu_hi);
-        // Orders handled by the smooth rule (broad peaks).
-        let mut broad: [i64; 8] = [0; 8];
-        let mut n_broad = 0usize;
-        let mut broad_overflow = false;
-        for n in n_lo..=n_hi {
-            // Exponent E_n(nu) = 4 pi^2 l^2 [(nu u - n/Lam)^2 + nu^2 v^2]
-            //                  = A_n + (nu - mu)^2 / (2 s^2).
-            let nf = n as f64;
-            let a_n;
-            let mu;
-            let s;
-            if rho2 > 0.0 {
-                a_n = (two_pi_l * nf * v / lam).powi(2) / rho2;
-                mu = u * nf / (lam * rho2);
-                s = 1.0 / (2.0 * std::f64::consts::SQRT_2 * PI * l * rho2.sqrt());
-            } else {
-                a_n = (two_pi_l * nf / lam).powi(2);
-                mu = 0.0;
-                s = f64::INFINITY;
-            }
-            if !(a_n <= RGB_TAIL_EXPONENT) {
-                continue;
-            }
-            let nearest = mu.clamp(nu_lo, nu_hi);
-            let gap = ((nearest - mu) / s).powi(2) * 0.5;
-            if !(a_n + gap <= RGB_TAIL_EXPONENT) {
-                continue;
-            }
-            // Significant part [a, b] of the peak inside the band.
-            let reach = RGB_PEAK_HALF_WIDTH_SIGMAS * s;
-            let (a, b) = if mu < nu_lo {
-                let d0 = nu_lo - mu;
-                (nu_lo, (mu + (d0 * d0 + reach * reach).sqrt()).min(nu_hi))
-            } else if mu > nu_hi {
-                let d0 = mu - nu_hi;
-                ((mu - (d0 * d0 + reach * reach).sqrt()).max(nu_lo), nu_hi)
-            } else {
-                ((mu - reach).max(nu_lo), (mu + reach).min(nu_hi))
-            };
-            if !(s <= RGB_BROAD_SIGMA) {
-                if n_broad < broad.len() {
-                    broad[n_broad] = n;
-                    n_broad += 1;
-                } else {
-                    broad_overflow = true;
-                }
-                continue;
-            }
-            // Quadratic fit of S(nu) = R nu^2 |c_n(2 pi nu w)|^2 at c, c +- delta
-            // (Gauss-Hermite nodes mu +- sqrt(3) s for a peak inside the band).
-            let delta = (3.0f64.sqrt() * s).min(0.5 * (b - a)).max(1e-9);
-            let c = mu.clamp(a + delta, b - delta);
-            let s2 = self.rect_s2_three(2.0 * PI * c * w, 2.0 * PI * delta * w);
-            let s_at = |nu: f64, s2: f64| -> f64 {
-                let beta = 2.0 * PI * nu * w;
-                let p = self.power_fast(n, beta, s2);
-                reflectance(1000.0 / nu) * nu * nu * p
-            };
-            let sm = s_at(c - delta, s2[0]);
-            let s0 = s_at(c, s2[1]);
-            let sp = s_at(c + delta, s2[2]);
-            let d1 = (sp - sm) / (2.0 * delta);
-            let d2 = (sp - 2.0 * s0 + sm) / (2.0 * delta * delta);
-            let e = c - mu;
-            let a0 = s0 - d1 * e + d2 * e * e;
-            let a1 = d1 - 2.0 * d2 * e;
-            let a2 = d2;
-            let m = peak_moments(mu, s, nu_lo, nu_hi);
-            let scale = c_const * fast_exp(-a_n);
-            for (ch, o) in out.iter_mut().enumerate() {
-                *o += scale * (a0 * m[0][ch] + a1 * m[1][ch] + a2 * m[2][ch]);
-            }
-        }
-        if n_broad > 0 || broad_overflow {
-            let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
-            let orders = (!broad_overflow).then_some(&broad[..n_broad]);
-            let sums = self.broad_sums(&rule.nu_per_um, u, v, w, orders);
-            for (j, (&nu, sum)) in rule.nu_per_um.iter().zip(sums).enumerate() {
-                let val = node_reflectance(j) * nu * nu * c_const * sum;
-                for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
-                    *o += wt * val;
-                }
-            }
-        }
-        for o in out.iter_mut() {
-            if !o.is_finite() {
-                *o = 0.0;
-            }
-        }
-        out
-    }
-
-    /// Sum over `orders` of |c_n(k w)|^2 exp(-E_n(k)), E_n = l^2 [(k u - 2 pi
+    /// Sum over `orders` of power(n) exp(-E_n(k)), E_n = l^2 [(k u - 2 pi
     /// n / Lam)^2 + k^2 v^2], terms that underflow left out: the spectral
-    /// kernel's sum, and the broad-peak rule's per node where its vectorised
-    /// loop does not apply.
-    fn order_sum(&self, k: f64, u: f64, v: f64, w: f64, orders: impl Iterator<Item = i64>) -> f64 {
+    /// kernel's sum (power |c_n(k w)|^2), and the broad-peak rule's per
+    /// node where its vectorised loop does not apply.
+    fn order_sum(
+        &self,
+        k: f64,
+        u: f64,
+        v: f64,
+        orders: impl Iterator<Item = i64>,
+        power: impl Fn(i64) -> f64,
+    ) -> f64 {
         let l = self.coherence_um;
         let g = 2.0 * PI / self.period_um;
-        let beta = k * w;
-        let s2 = self.rect_s2(beta);
         let e_v = (l * k * v).powi(2);
         let mut sum = 0.0;
         for n in orders {
             let d = l * (k * u - g * n as f64);
             let e = d * d + e_v;
             if e < EXP_UNDERFLOW {
-                sum += self.power_fast(n, beta, s2) * fast_exp(-e);
+                sum += power(n) * fast_exp(-e);
             }
         }
         sum
     }
-
-    /// Per node nu of the broad-peak rule, sum over `orders` (None: every
-    /// order the spectral kernel would take at that node) of |c_n|^2
-    /// exp(-E_n(nu)). For rectangular profiles, whose |c_n|^2 is linear in
-    /// sin^2(beta h / 2), the loop over the nodes has no branches and no
-    /// library calls and vectorises: this is most of an RGB evaluation near
-    /// a grating's mirror direction.
-    fn broad_sums(
-        &self,
-        nu_per_um: &[f64],
-        u: f64,
-        v: f64,
-        w: f64,
-        orders: Option<&[i64]>,
-    ) -> [f64; RGB_SMOOTH_NODES] {
-        let mut sums = [0.0; RGB_SMOOTH_NODES];
-        let l = self.coherence_um;
-        let g = 2.0 * PI / self.period_um;
-        if let (
-            Model::Rect {
-                height_um,
-                fill,
-                sinc2,
-            },
-            Some(orders),
-            Some(nu),
-        ) = (
-            &self.model,
-            orders,
-            nu_per_um.first_chunk::<RGB_SMOOTH_NODES>(),
-        ) {
-            // Below exp(-700) a term is dropped (fast_exp_vectorisable does
-            // not underflow to 0 by itself).
-            const EXP_FLOOR: f64 = 700.0;
-            let s2: [f64; RGB_SMOOTH_NODES] =
-                std::array::from_fn(|j| sin_squared(PI * height_um * w * nu[j]));
-            let lk: [f64; RGB_SMOOTH_NODES] = std::array::from_fn(|j| 2.0 * PI * l * nu[j]);
-            for &n in orders {
-                let (c0, c1) = rect_power_coefficients(n, *fill, sinc2);
-                let lg = l * g * n as f64;
-                for j in 0..RGB_SMOOTH_NODES {
-                    let d = lk[j].mul_add(u, -lg);
-                    let ev = lk[j] * v;
-                    let e = d.mul_add(d, ev * ev);
-                    let power = c1.mul_add(s2[j], c0).max(0.0);
-                    let term = power * fast_exp_vectorisable(-e);
-                    sums[j] += if e < EXP_FLOOR { term } else { 0.0 };
-                }
-            }
-            return sums;
-        }
-        for (sum, &nu) in sums.iter_mut().zip(nu_per_um) {
-            let k = 2.0 * PI * nu;
-            *sum = match orders {
-                Some(orders) => self.order_sum(k, u, v, w, orders.iter().copied()),
-                // Pathological: more broad orders than slots; take every
-                // order the spectral kernel would at this node (the peak
-                // width does not depend on n, so none of them is narrow).
-                None => {
-                    let (lo, hi) = self.orders_near(k, u);
-                    self.order_sum(k, u, v, w, lo..=hi)
-                }
-            };
-        }
-        sums
-    }
-}
-
-/// Gaussian moments of the sRGB weight for one peak. Peaks narrower than a
-/// quarter of a 1 nm cell of the weight table (in wavenumber, mu^2 / 1000)
-/// and inside the band use the 3-point Gauss-Hermite rule (nodes mu and
-/// mu +- sqrt(3) s) on the weight itself: exact for a weight that is a
-/// quintic across the peak, and off by at most ~0.11 s |slope jump| where
-/// the piecewise-linear weight has a kink under the peak (below 2e-3 of M0
-/// for D65's 1 nm structure at this width). This avoids the per-cell erf
-/// integration of `spectrum::gaussian_moments` (several hundred ns) for the
-/// many narrow peaks of long coherence lengths. Everything else goes to
-/// `spectrum::gaussian_moments`.
-fn peak_moments(mu: f64, s: f64, nu_lo: f64, nu_hi: f64) -> [[f64; 3]; 3] {
-    let narrow = s <= 0.25e-3 * mu * mu && mu - 8.0 * s > nu_lo && mu + 8.0 * s < nu_hi;
-    if !narrow {
-        return spectrum::gaussian_moments(mu, s);
-    }
-    let r = 3.0f64.sqrt() * s;
-    let w0 = spectrum::srgb_weight_per_wavenumber(mu);
-    let wp = spectrum::srgb_weight_per_wavenumber(mu + r);
-    let wm = spectrum::srgb_weight_per_wavenumber(mu - r);
-    let norm = (2.0 * PI).sqrt() * s;
-    let mut m = [[0.0; 3]; 3];
-    for c in 0..3 {
-        m[0][c] = norm * (2.0 / 3.0 * w0[c] + (wp[c] + wm[c]) / 6.0);
-        m[1][c] = norm * r / 6.0 * (wp[c] - wm[c]);
-        m[2][c] = norm * s * s * 0.5 * (wp[c] + wm[c]);
-    }
-    m
-}
-
-/// Orders n whose peak can touch the band [nu_lo, nu_hi] (in wavenumber) for
-/// a given u: n / Lam within sqrt(RGB_TAIL_EXPONENT) / (2 pi l) of
-/// [u nu_lo, u nu_hi].
-fn orders_in_band(u: f64, lam: f64, l: f64, nu_lo: f64, nu_hi: f64) -> (i64, i64) {
-    let slack = RGB_TAIL_EXPONENT.sqrt() / (2.0 * PI * l);
-    let (x0, x1) = if u >= 0.0 {
-        (u * nu_lo, u * nu_hi)
-    } else {
-        (u * nu_hi, u * nu_lo)
-    };
-    let lo = ((x0 - slack) * lam).ceil();
-    let hi = ((x1 + slack) * lam).floor();
-    if !(lo.is_finite() && hi.is_finite()) || hi - lo > 1e6 {
-        return (1, 0);
-    }
-    (lo as i64, hi as i64)
 }
 
 /// sin(pi x) / (pi x).

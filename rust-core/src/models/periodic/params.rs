@@ -23,6 +23,20 @@ pub mod range {
     pub const COHERENCE_MAX_UM: f64 = 1e4;
     pub const HEIGHT_UM: (f64, f64) = (0.0, 100.0);
     pub const HEIGHTS_LEN: (usize, usize) = (2, 65536);
+    /// Fourier orders each side of the rigorous solver (`fourier_orders`).
+    pub const FOURIER_ORDERS: (usize, usize) = (5, crate::rigorous::solver::MAX_ORDERS);
+}
+
+/// Where each order's power comes from (`orders`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OrderPowers {
+    /// Stam's formula: scalar (Kirchhoff) theory, times Fresnel.
+    Kirchhoff,
+    /// Maxwell's equations: each order's efficiency from the rigorous
+    /// solver (crate::rigorous), tabulated once per grating, with
+    /// `fourier_orders` each side (`rigorous::default_fourier_orders` when
+    /// not given).
+    Rigorous { fourier_orders: usize },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -34,6 +48,8 @@ pub struct PeriodicParams {
     /// the programs then read the height per point and serve every height
     /// up to this.
     pub height_um_max: Option<f64>,
+    /// Where each order's power comes from (`orders`).
+    pub orders: OrderPowers,
 }
 
 fn err(msg: String) -> StamError {
@@ -147,6 +163,19 @@ impl crate::models::ModelParams for PeriodicParams {
                 true,
             )
             .note("sine profile; at least height_um; the plugin sets it from a height_um texture"),
+            KeyDoc::text(
+                "orders",
+                "where each diffraction order's power comes from",
+                "\"kirchhoff\" (Stam's formula) or \"rigorous\" (Maxwell's equations, docs/rigorous.md)".into(),
+            )
+            .default(json!("kirchhoff"))
+            .note("rigorous: fresnel a metal or {eta, k}; energy-exact, so 'energy' does not apply; scalar variants"),
+            KeyDoc::integer(
+                "fourier_orders",
+                "Fourier orders each side that the rigorous solver retains",
+                range::FOURIER_ORDERS,
+            )
+            .note("orders \"rigorous\"; default 25, more for periods above 2.5 um"),
         ]
     }
 
@@ -173,6 +202,15 @@ impl crate::models::ModelParams for PeriodicParams {
         if let Some(max) = self.height_um_max {
             out.insert("height_um_max".into(), json!(max));
         }
+        match self.orders {
+            OrderPowers::Kirchhoff => {
+                out.insert("orders".into(), json!("kirchhoff"));
+            }
+            OrderPowers::Rigorous { fourier_orders } => {
+                out.insert("orders".into(), json!("rigorous"));
+                out.insert("fourier_orders".into(), json!(fourier_orders));
+            }
+        }
     }
 
     fn with_param(&self, id: ParamId, value: f64) -> PeriodicParams {
@@ -197,6 +235,8 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, Stam
         "height_um",
         "width_um",
         "height_um_max",
+        "orders",
+        "fourier_orders",
     ])?;
     let defaults = |v: f64| if compact_disc { Some(v) } else { None };
     let period_um = match r.ranged("period_um", range::PERIOD_UM, false, " um")? {
@@ -322,12 +362,43 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, Stam
             }
         }
     }
+    let orders = parse_orders(r, period_um, height_um_max)?;
     Ok(PeriodicParams {
         period_um,
         coherence_um,
         profile,
         height_um_max,
+        orders,
     })
+}
+
+fn parse_orders(
+    r: &Reader,
+    period_um: f64,
+    height_um_max: Option<f64>,
+) -> Result<OrderPowers, StamError> {
+    let given = r.integer("fourier_orders", range::FOURIER_ORDERS)?;
+    let fourier_orders =
+        given.unwrap_or_else(|| crate::rigorous::default_fourier_orders(period_um));
+    let orders = match r.obj.get("orders") {
+        None => OrderPowers::Kirchhoff,
+        Some(Value::String(s)) if s == "kirchhoff" => OrderPowers::Kirchhoff,
+        Some(Value::String(s)) if s == "rigorous" => OrderPowers::Rigorous { fourier_orders },
+        Some(other) => {
+            return Err(err(format!(
+                "parameter 'orders' = {other} is not accepted: \"kirchhoff\" (default: Stam's formula) or \"rigorous\" (Maxwell's equations)"
+            )))
+        }
+    };
+    match orders {
+        OrderPowers::Kirchhoff if given.is_some() => Err(err(
+            "parameter 'fourier_orders' applies to \"orders\": \"rigorous\" only".into(),
+        )),
+        OrderPowers::Rigorous { .. } if height_um_max.is_some() => Err(err(
+            "parameter 'height_um_max' (a height texture) cannot be used with \"orders\": \"rigorous\" (its efficiencies are tabulated for one profile)".into(),
+        )),
+        _ => Ok(orders),
+    }
 }
 
 fn parse_heights(value: &Value) -> Result<Vec<f64>, StamError> {

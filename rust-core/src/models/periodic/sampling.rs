@@ -6,7 +6,7 @@
 //! mode samples the orders' rainbows over the band (`RainbowLobe`), the
 //! whole strategy held by the table's cell.
 
-use super::{Periodic, PeriodicSurface};
+use super::Periodic;
 use crate::models::Shading;
 use crate::optics::fresnel::Fresnel;
 use crate::sampling::warps::{inverse_normal, pick, pick_cdf, uv_to_direction};
@@ -291,7 +291,7 @@ impl GratingTable {
     }
 
     /// The cell of wi (built on first use).
-    fn cell(&self, fresnel: &Fresnel, p: &PeriodicSurface, wi: DVec3) -> &GratingCell {
+    fn cell(&self, fresnel: &Fresnel, model: &Periodic, wi: DVec3) -> &GratingCell {
         let n = self.cells_per_axis;
         let index = |x: f64| (((x + 1.0) * 0.5 * n as f64) as usize).min(n - 1);
         let (ix, iy) = (index(wi.x), index(wi.y));
@@ -300,8 +300,8 @@ impl GratingTable {
             // Corner cells reach outside the disk: their centre moves onto
             // the rim.
             let wi_centre = within_rim(centre(ix), centre(iy));
-            let weights = self.cell_weights(p, wi_centre);
-            let rgb = [self.rainbow(fresnel, p, wi_centre.z, &weights)];
+            let weights = self.cell_weights(model, wi_centre);
+            let rgb = [self.rainbow(fresnel, model, wi_centre.z, &weights)];
             GratingCell { weights, rgb }
         })
     }
@@ -312,7 +312,8 @@ impl GratingTable {
     /// RAINBOW_WEIGHT_STEP-th node and interpolated linearly in between
     /// where both neighbours carry weight (|c_n|^2 and G vary slowly over
     /// a few bins), exact elsewhere.
-    fn cell_weights(&self, p: &PeriodicSurface, wi: DVec3) -> Vec<f32> {
+    fn cell_weights(&self, model: &Periodic, wi: DVec3) -> Vec<f32> {
+        let p = &model.surface;
         let (lo, bins, n_max) = (RGB_BAND_NM.0, self.bins, self.n_max);
         let (bin_nm, stride) = (self.bin_nm(), bins + 1);
         let period_nm = 1000.0 * p.period_um();
@@ -327,8 +328,7 @@ impl GratingTable {
         let weight_at = |n: i64, i: usize| {
             let lambda = lo + i as f64 * bin_nm;
             let u_n = n as f64 * lambda / period_nm;
-            let wo = rim_direction(wi, u_n);
-            order_weight(wi, wo, lambda, 1.0, |beta| p.order_power(n, beta))
+            model.order_weight(n, wi, rim_direction(wi, u_n), lambda)
         };
         let orders = (2 * n_max + 1) as usize;
         let mut w = vec![0.0; orders * stride];
@@ -362,17 +362,19 @@ impl GratingTable {
     fn rainbow(
         &self,
         fresnel: &Fresnel,
-        p: &PeriodicSurface,
+        model: &Periodic,
         cos_i: f64,
         w: &[f32],
     ) -> Component<Lobe> {
+        let p = &model.surface;
         let (lo, bins, n_max) = (RGB_BAND_NM.0, self.bins, self.n_max);
         let (bin_nm, stride) = (self.bin_nm(), bins + 1);
         let orders = (2 * n_max + 1) as usize;
         let band_density = rainbow_band_density(bins);
         let mut y = vec![0.0; orders * stride];
         for i in 0..stride {
-            let band = band_density[i] * fresnel.reflectance(cos_i, lo + i as f64 * bin_nm);
+            let band =
+                band_density[i] * model.order_reflectance(fresnel, cos_i, lo + i as f64 * bin_nm);
             if !(band > 0.0) {
                 continue;
             }
@@ -499,7 +501,7 @@ impl Periodic {
     /// cell (the rainbow), borrowed.
     pub(super) fn rgb_strategy(&self, shading: &Shading, wi: DVec3) -> Components<'_, Lobe> {
         match self.grating_table() {
-            Some(table) => Components::Shared(&table.cell(shading.fresnel, &self.surface, wi).rgb),
+            Some(table) => Components::Shared(&table.cell(shading.fresnel, self, wi).rgb),
             None => Components::Local(smallvec![Component::cosine_only()]),
         }
     }
@@ -530,7 +532,7 @@ fn grating_component(
         return Component::cosine_only();
     }
     let (n_lo, n_hi) = (n_lo as i64, n_hi as i64);
-    let cell = table.cell(fresnel, p, wi);
+    let cell = table.cell(fresnel, model, wi);
     let mut prob: Vec<f64> = (n_lo..=n_hi)
         .map(|n| {
             let w = table.weight(cell, n, lambda_nm);
@@ -538,9 +540,7 @@ fn grating_component(
                 w
             } else {
                 let wo = uv_to_direction(wi, n as f64 * du, 0.0);
-                wo.map_or(0.0, |wo| {
-                    order_weight(wi, wo, lambda_nm, 1.0, |beta| p.order_power(n, beta))
-                })
+                wo.map_or(0.0, |wo| model.order_weight(n, wi, wo, lambda_nm))
             }
         })
         .collect();
@@ -559,6 +559,37 @@ fn grating_component(
             prob,
         })),
     )
+}
+
+impl Periodic {
+    /// Order n's sampling weight at unit wi for its centre direction wo,
+    /// without the Fresnel term at the incidence (`order_reflectance`):
+    /// Stam's `order_weight`, or a rigorous grating's efficiency (which
+    /// includes the metal's reflection).
+    fn order_weight(&self, n: i64, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
+        match &self.rigorous {
+            None => order_weight(wi, wo, lambda_nm, 1.0, |beta| {
+                self.surface.order_power(n, beta)
+            }),
+            Some(r) => {
+                let w = r.table().efficiency(lambda_nm, -wi.x, -wi.y, -n);
+                if w.is_finite() && w > 0.0 {
+                    w
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The reflectance that multiplies the order weights at the incidence
+    /// cosine: Fresnel's for Stam's orders, 1 for rigorous ones.
+    fn order_reflectance(&self, fresnel: &Fresnel, cos_i: f64, lambda_nm: f64) -> f64 {
+        match self.rigorous {
+            None => fresnel.reflectance(cos_i, lambda_nm),
+            Some(_) => 1.0,
+        }
+    }
 }
 
 /// Direction of a grating order's centre (u, v) = (u_n, 0) for wi, moved

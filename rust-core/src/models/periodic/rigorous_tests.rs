@@ -1,0 +1,273 @@
+//! `"orders": "rigorous"` against the solver it tabulates: each order's
+//! lobe reflects the solver's efficiency, f is reciprocal, sampling is
+//! consistent, RGB matches the spectral reference, bad parameters are
+//! refused by name.
+
+use std::sync::OnceLock;
+
+use glam::DVec3;
+
+use crate::material::Brdf;
+use crate::rigorous::{solve, Grating, Incidence, Medium};
+use crate::testing::chi2::chi2_fit;
+use crate::testing::mean_var;
+
+use super::params::{CD_BUMP_HEIGHT_UM, CD_BUMP_WIDTH_UM, CD_PERIOD_UM};
+use super::Profile;
+
+const DISC: &str = r#"{"surface":"cd","fresnel":"aluminium","orders":"rigorous"}"#;
+
+/// The rigorous compact disc, built once for all the tests of this file
+/// (its table takes seconds).
+fn disc() -> &'static Brdf {
+    static DISC_BRDF: OnceLock<Brdf> = OnceLock::new();
+    DISC_BRDF.get_or_init(|| Brdf::from_json(DISC).unwrap())
+}
+
+fn disc_grating() -> Grating {
+    Grating {
+        period_um: CD_PERIOD_UM,
+        profile: Profile::Rect {
+            height_um: CD_BUMP_HEIGHT_UM,
+            width_um: CD_BUMP_WIDTH_UM,
+        },
+        metal: Medium::Metal(crate::optics::fresnel::metal_by_name("aluminium").unwrap()),
+        slices: 16,
+    }
+}
+
+fn direction(theta_deg: f64, phi_deg: f64) -> DVec3 {
+    let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
+    DVec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos())
+}
+
+/// Distance in |k_t| from the nearest Rayleigh anomaly of the incidence
+/// (where the table's error concentrates).
+fn anomaly_distance(wi: DVec3, lambda_nm: f64) -> f64 {
+    let step = lambda_nm * 1e-3 / CD_PERIOD_UM;
+    (-30..=30)
+        .map(|m| ((-wi.x + m as f64 * step).hypot(wi.y) - 1.0).abs())
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Each order's lobe, f cos integrated over it (a midpoint rule over
+/// +-6 sd in the projected plane), against the solver's efficiency.
+#[test]
+fn each_order_reflects_the_solvers_efficiency() {
+    let brdf = disc();
+    let l = super::params::CD_COHERENCE_UM;
+    let (mut worst, mut worst_total, mut count) = (0.0f64, 0.0f64, 0);
+    for &(lambda, theta, phi) in &[
+        (450.0, 0.0, 0.0),
+        (550.0, 30.0, 0.0),
+        (650.0, 45.0, 180.0),
+        (500.0, 20.0, 60.0),
+        (600.0, 60.0, 30.0),
+        (420.0, 10.0, 90.0),
+        (700.0, 35.0, 150.0),
+    ] {
+        let wi = direction(theta, phi);
+        let inc = Incidence {
+            lambda_nm: lambda,
+            theta_rad: wi.z.acos(),
+            phi_rad: (-wi.y).atan2(-wi.x),
+        };
+        let d = solve(&disc_grating().stack(lambda, 1.0), &inc, 25).unwrap();
+        let k = 2.0 * std::f64::consts::PI / (lambda * 1e-3);
+        let sd = 1.0 / (std::f64::consts::SQRT_2 * k * l);
+        let (mut total, mut total_solver) = (0.0, 0.0);
+        for o in &d.reflected {
+            let centre = (-wi.x + o.m as f64 * lambda * 1e-3 / CD_PERIOD_UM, -wi.y);
+            total_solver += o.unpolarised();
+            if centre.0.hypot(centre.1) > 1.0 - 8.0 * sd {
+                continue;
+            }
+            let cells = 48;
+            let h = 12.0 * sd / cells as f64;
+            let mut sum = 0.0;
+            for i in 0..cells {
+                for j in 0..cells {
+                    let x = centre.0 - 6.0 * sd + (i as f64 + 0.5) * h;
+                    let y = centre.1 - 6.0 * sd + (j as f64 + 0.5) * h;
+                    let z = (1.0 - x * x - y * y).sqrt();
+                    // f cos_o d omega = f dx dy.
+                    sum += brdf.eval_spectral(wi, DVec3::new(x, y, z), lambda) * h * h;
+                }
+            }
+            let err = (sum - o.unpolarised()).abs();
+            println!(
+                "{lambda} nm, wi ({theta}, {phi}) deg, order {}: material {sum:.4}, solver {:.4}, anomaly distance {:.3}",
+                o.m,
+                o.unpolarised(),
+                anomaly_distance(wi, lambda)
+            );
+            worst = worst.max(err);
+            total += sum;
+            count += 1;
+        }
+        worst_total = worst_total.max((total - total_solver).abs());
+    }
+    println!("{count} orders: worst |material - solver| {worst:.4}, worst total {worst_total:.4}");
+    assert!(count > 40);
+    assert!(worst < 0.04, "worst order error {worst}");
+    assert!(worst_total < 0.03, "worst total error {worst_total}");
+}
+
+/// f(wi, wo) = f(wo, wi): exact by construction (both sides' tables).
+#[test]
+fn rigorous_orders_are_reciprocal() {
+    let brdf = disc();
+    let mut rng = crate::benchmark::SplitMix64(7);
+    let mut checked = 0;
+    for _ in 0..400 {
+        let wi = direction(80.0 * rng.next_f64(), 360.0 * rng.next_f64());
+        let lambda = 400.0 + 300.0 * rng.next_f64();
+        // Near an order: the centre of a random propagating order.
+        let step = lambda * 1e-3 / CD_PERIOD_UM;
+        let m = (rng.next_f64() * 9.0) as i64 - 4;
+        let (x, y) = (
+            -wi.x + m as f64 * step + 2e-3 * (rng.next_f64() - 0.5),
+            -wi.y,
+        );
+        if x.hypot(y) > 0.99 {
+            continue;
+        }
+        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        let (a, b) = (
+            brdf.eval_spectral(wi, wo, lambda),
+            brdf.eval_spectral(wo, wi, lambda),
+        );
+        assert!((a - b).abs() <= 1e-12 * a.max(b), "{a} vs {b}");
+        let (a, b) = (brdf.eval_rgb(wi, wo), brdf.eval_rgb(wo, wi));
+        for c in 0..3 {
+            assert!((a[c] - b[c]).abs() <= 1e-9 * a[c].abs().max(b[c].abs()).max(1e-6));
+        }
+        checked += usize::from(a.iter().any(|&c| c > 0.0));
+    }
+    assert!(checked > 100, "{checked}");
+}
+
+/// The albedo by importance sampling equals the solver's total reflectance
+/// (a grating reflects at most 1), with every weight f cos / pdf finite.
+#[test]
+fn sampled_albedo_is_the_solvers_reflectance() {
+    let brdf = disc();
+    for &(lambda, theta, phi) in &[(550.0, 30.0, 0.0), (450.0, 60.0, 45.0), (650.0, 5.0, 90.0)] {
+        let wi = direction(theta, phi);
+        let s = brdf.sampler(wi, Some(lambda));
+        let mut rng = crate::benchmark::SplitMix64(11);
+        let weights: Vec<f64> = (0..20_000)
+            .map(|_| {
+                let r = s.sample([rng.next_f64(), rng.next_f64(), rng.next_f64()]);
+                if r.pdf > 0.0 {
+                    let w = brdf.eval_spectral(wi, r.wo, lambda) * r.wo.z / r.pdf;
+                    assert!(w.is_finite() && w >= 0.0, "{w}");
+                    w
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let (mean, var) = mean_var(&weights);
+        let se = (var / weights.len() as f64).sqrt();
+        let inc = Incidence {
+            lambda_nm: lambda,
+            theta_rad: wi.z.acos(),
+            phi_rad: (-wi.y).atan2(-wi.x),
+        };
+        let d = solve(&disc_grating().stack(lambda, 1.0), &inc, 25).unwrap();
+        let r = 0.5 * (d.reflectance()[0] + d.reflectance()[1]);
+        println!("{lambda} nm ({theta}, {phi}): sampled albedo {mean:.4} +- {se:.4}, solver {r:.4}, cv {:.3}", var.sqrt() / mean);
+        assert!(mean <= 1.0 + 3.0 * se);
+        assert!((mean - r).abs() < 0.03 + 4.0 * se, "{mean} vs {r}");
+        // Sampling from the efficiencies: a low variance.
+        assert!(var.sqrt() < 0.5 * mean, "cv {}", var.sqrt() / mean);
+    }
+}
+
+/// The strategies' samples follow their pdf (spectral and RGB). A
+/// coherence length of 5 um: the disc's 50 um lobes (sd 1e-3) are
+/// narrower than the harness's cubature resolves, for Stam's orders too.
+#[test]
+fn rigorous_sampling_passes_chi_square() {
+    let brdf = Brdf::from_json(
+        r#"{"surface":"cd","fresnel":"aluminium","orders":"rigorous","coherence_um":5}"#,
+    )
+    .unwrap();
+    for (i, &(lambda, theta, phi)) in [(550.0, 30.0, 0.0), (450.0, 60.0, 45.0)].iter().enumerate() {
+        let wi = direction(theta, phi);
+        let seed = 5 + 2 * i as u64;
+        let fit = chi2_fit(&brdf.sampler(wi, Some(lambda)), seed, 40_000);
+        println!("{lambda} nm ({theta}, {phi}): chi2 p {}", fit.p_value);
+        assert!(fit.p_value > 1e-3, "chi2 p {}", fit.p_value);
+        let fit = chi2_fit(&brdf.sampler(wi, None), seed + 1, 40_000);
+        println!("RGB ({theta}, {phi}): chi2 p {}", fit.p_value);
+        assert!(fit.p_value > 1e-3, "chi2 p (RGB) {}", fit.p_value);
+    }
+}
+
+/// RGB equals the spectral reference integration near orders.
+#[test]
+fn rigorous_rgb_matches_the_spectral_reference() {
+    let brdf = disc();
+    let mut worst = 0.0f64;
+    for &(theta, phi, m, dx) in &[
+        (30.0, 0.0, 1, 0.0),
+        (30.0, 0.0, -1, 0.01),
+        (10.0, 90.0, 2, -0.02),
+        (45.0, 180.0, 0, 0.0),
+        (45.0, 180.0, 0, 3e-4),
+        (20.0, 30.0, -3, 0.0),
+    ] {
+        let wi = direction(theta, phi);
+        // The order's centre at 550 nm, moved by dx.
+        let x = -wi.x + m as f64 * 0.55 / CD_PERIOD_UM + dx;
+        let y = -wi.y;
+        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        let fast = brdf.eval_rgb(wi, wo);
+        let reference = crate::spectrum::gamut_map(brdf.eval_rgb_reference(wi, wo, 0.25));
+        let scale = reference.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+        let err = (0..3)
+            .map(|c| (fast[c] - reference[c]).abs())
+            .fold(0.0, f64::max)
+            / scale;
+        println!("({theta}, {phi}) order {m} dx {dx}: {fast:?} vs {reference:?}: {err:.2e}");
+        assert!(scale > 0.0);
+        worst = worst.max(err);
+    }
+    assert!(worst < 1e-2, "worst relative RGB error {worst}");
+}
+
+#[test]
+fn rigorous_parameters_are_checked_by_name() {
+    let err = |json: &str| Brdf::from_json(json).err().map(|e| e.to_string()).unwrap();
+    let e = err(r#"{"surface":"cd","orders":"rigorous","fresnel":0.9}"#);
+    assert!(e.contains("fresnel") && e.contains("rigorous"), "{e}");
+    let e = err(r#"{"surface":"cd","orders":"rigorous","fresnel":"gold","energy":"conserving"}"#);
+    assert!(e.contains("energy"), "{e}");
+    let e = err(r#"{"surface":"cd","fourier_orders":30}"#);
+    assert!(e.contains("fourier_orders"), "{e}");
+    let e = err(r#"{"surface":"cd","orders":"maxwell"}"#);
+    assert!(e.contains("orders") && e.contains("rigorous"), "{e}");
+    let e = err(r#"{"surface":"cd","orders":"rigorous","fresnel":"gold","fourier_orders":2}"#);
+    assert!(e.contains("fourier_orders"), "{e}");
+    let e = err(
+        r#"{"surface":"periodic","period_um":1.6,"coherence_um":6,"profile":"sine","height_um":0.1,"height_um_max":0.2,"orders":"rigorous","fresnel":"gold"}"#,
+    );
+    assert!(e.contains("height_um_max"), "{e}");
+    // The resolved parameters name the mode and the truncation, and
+    // read back to the same material.
+    let resolved = crate::material::params::resolved_json_text(DISC).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&resolved).unwrap();
+    assert_eq!(v["orders"], "rigorous");
+    assert_eq!(v["fourier_orders"], 25);
+    assert_eq!(v["energy"], "stam");
+    let again = crate::material::params::MaterialParams::from_json(&resolved).unwrap();
+    assert_eq!(
+        again,
+        crate::material::params::MaterialParams::from_json(DISC).unwrap()
+    );
+    // The JIT variants have no programs for it yet: they refuse it.
+    use crate::material::program::ProgramKind;
+    assert!(disc().program(ProgramKind::EvalRgb).is_none());
+}

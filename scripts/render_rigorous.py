@@ -1,0 +1,75 @@
+"""render_rigorous: the compact disc of scenes/cd.xml with each order's power
+from Stam's formula (`"orders": "kirchhoff"`, with the default energy
+scaling) and from Maxwell's equations (`"orders": "rigorous"`), side by side
+(docs/rigorous.md, "In a material").
+
+    python scripts/render_rigorous.py [--variant scalar_spectral] [--res 256]
+        [--spp 64] [--out docs/rigorous_render.png]
+
+Prints each render's time and the disc's mean linear RGB. The rigorous
+table is built on the first run (seconds, progress on stderr) and kept on
+disk (STAM_CACHE_DIR).
+"""
+
+import argparse
+import os
+import re
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import stam_mitsuba  # noqa: E402
+import stam_images  # noqa: E402
+
+SCENE = os.path.join(stam_mitsuba.PROJECT_DIR, 'scenes', 'cd.xml')
+
+
+def scene_text(orders):
+    """cd.xml with the disc's orders set."""
+    with open(SCENE) as f:
+        text = f.read()
+    line = '<string name="surface" value="cd"/>'
+    assert line in text
+    return text.replace(line, line + '\n            <string name="orders" value="%s"/>' % orders)
+
+
+def render(mi, orders, res, spp):
+    path = os.path.join(stam_mitsuba.PROJECT_DIR, 'build', 'cd_%s.xml' % orders)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, 'w') as f:
+        f.write(scene_text(orders))
+    scene = mi.load_file(path, res=res, spp=spp)
+    start = time.time()
+    image = np.array(mi.render(scene))[..., :3]
+    return image, time.time() - start
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--variant', default='scalar_spectral')
+    ap.add_argument('--res', type=int, default=256)
+    ap.add_argument('--spp', type=int, default=64)
+    ap.add_argument('--out', default=os.path.join(stam_mitsuba.PROJECT_DIR, 'docs',
+                                                  'rigorous_render.png'))
+    args = ap.parse_args()
+    mi = stam_mitsuba.setup(args.variant)
+    images = []
+    for orders in ('kirchhoff', 'rigorous'):
+        image, seconds = render(mi, orders, args.res, args.spp)
+        mean = image.reshape(-1, 3).mean(axis=0)
+        print('%-9s %s %dx%d %d spp: %.1f s, mean linear RGB %s'
+              % (orders, args.variant, args.res, args.res, args.spp, seconds,
+                 np.array2string(mean, precision=4)))
+        images.append(image)
+    # One exposure for both: the Kirchhoff image's.
+    exposure = stam_images.auto_exposure(images[0])
+    gap = np.full((args.res, 4, 3), 1.0 / exposure)
+    stam_images.save_png(args.out, np.concatenate([images[0], gap, images[1]], axis=1),
+                         exposure)
+    print('wrote', args.out, '(left: kirchhoff, right: rigorous)')
+
+
+if __name__ == '__main__':
+    main()
