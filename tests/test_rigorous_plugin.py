@@ -1,0 +1,92 @@
+"""`"orders": "rigorous"` in the Mitsuba plugin (docs/rigorous.md, "In a
+material"): the scalar variants evaluate, sample and render the core's
+rigorous grating; the JIT variants, which have no programs for it yet,
+refuse it with a message that says where it runs.
+
+The core's own checks of the mode (each order's lobe against the solver,
+reciprocity, sampling, RGB) are rust-core/src/models/periodic/
+rigorous_tests.rs; here only what the plugin adds is tested.
+"""
+
+import math
+import os
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, 'scripts'))
+import stam_mitsuba  # noqa: E402
+from stam_diffraction import core as stam_core  # noqa: E402
+
+import mitsuba as mi  # noqa: E402
+
+DISC = {'surface': 'cd', 'fresnel': 'aluminium', 'orders': 'rigorous'}
+
+
+def order_pairs(n=24, seed=3):
+    """(wi, wo) with wo near a propagating order of wi at 550 nm."""
+    rng = np.random.default_rng(seed)
+    pairs = []
+    while len(pairs) < n:
+        t, p = math.radians(70 * rng.random()), 2 * math.pi * rng.random()
+        wi = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+        m = int(rng.integers(-3, 4))
+        x = -wi[0] + m * 0.55 / 2.5 + 2e-3 * (rng.random() - 0.5)
+        y = -wi[1]
+        if x * x + y * y < 0.95:
+            pairs.append((wi, np.array([x, y, math.sqrt(1 - x * x - y * y)])))
+    return pairs
+
+
+@pytest.mark.parametrize('variant', ['scalar_rgb', 'scalar_spectral'])
+def test_scalar_variants_evaluate_the_cores_rigorous_grating(variant):
+    """eval / cos equals the core's f at pairs near orders (f32 inputs);
+    sampled directions carry finite, non-negative weights."""
+    stam_mitsuba.setup(variant)
+    bsdf = mi.load_dict({'type': 'diffraction', **DISC})
+    ctx = mi.BSDFContext()
+    pairs = order_pairs()
+    with stam_core.Brdf(DISC) as core:
+        compared = 0
+        for wi, wo in pairs:
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wi)
+            if variant == 'scalar_rgb':
+                got = np.array(bsdf.eval(ctx, si, mi.Vector3f(*wo)), dtype=np.float64) / wo[2]
+                want = core.eval_rgb(wi[None], wo[None])[0]
+            else:
+                si.wavelengths = mi.Spectrum(550.0, 550.0, 550.0, 550.0)
+                got = np.array(bsdf.eval(ctx, si, mi.Vector3f(*wo)))[0] / wo[2]
+                want = core.eval_spectral(wi[None], wo[None], np.array([550.0]))[0]
+            scale = np.max(np.abs(want))
+            if scale > 0:
+                compared += 1
+                # f32 directions move a 50 um lobe by up to ~1e-3 of itself
+                assert np.max(np.abs(got - want)) <= 2e-3 * scale + 1e-6, (wi, wo, got, want)
+        assert compared >= len(pairs) // 2
+    si = mi.SurfaceInteraction3f()
+    si.wi = mi.Vector3f(0.3, 0.1, math.sqrt(0.9))
+    if variant == 'scalar_spectral':
+        si.wavelengths = mi.Spectrum(450.0, 520.0, 600.0, 680.0)
+    sampler = np.random.default_rng(1)
+    for _ in range(200):
+        bs, weight = bsdf.sample(ctx, si, sampler.random(), mi.Point2f(*sampler.random(2)))
+        w = np.array(weight, dtype=np.float64)
+        assert np.all(np.isfinite(w)) and np.all(w >= 0), w
+
+
+def test_jit_variants_refuse_it_and_say_where_it_runs():
+    stam_mitsuba.setup('llvm_ad_rgb')
+    with pytest.raises(Exception) as e:
+        mi.load_dict({'type': 'diffraction', **DISC})
+    assert 'scalar_' in str(e.value) and 'docs/parameters.md' in str(e.value), str(e.value)
+
+
+def test_rigorous_is_refused_with_a_constant_reflectance():
+    stam_mitsuba.setup('scalar_rgb')
+    with pytest.raises(Exception) as e:
+        mi.load_dict({'type': 'diffraction', 'surface': 'cd', 'orders': 'rigorous',
+                      'fresnel': 0.9})
+    assert 'fresnel' in str(e.value) and 'rigorous' in str(e.value), str(e.value)
