@@ -205,6 +205,19 @@ pub fn material(rng: &mut Rng, kind: usize) -> String {
     if rng.chance(0.2) && matches!(surface, "gaussian" | "anisotropic" | "fractal") {
         fields.push(format!("\"rgb_nodes\":{}", rng.range(4.0, 65.0) as usize));
     }
+    // Every third round's disc has rigorous orders instead: the paper's
+    // disc in aluminium or gold at three coherence lengths (two tables,
+    // each built once per process and kept on disk), chosen by `kind` and
+    // made after the random draws, so that the stream of the other
+    // materials is unchanged.
+    if surface == "cd" && kind / SURFACES.len() % 3 == 1 {
+        let round = kind / SURFACES.len() / 3;
+        return format!(
+            "{{\"surface\":\"cd\",\"orders\":\"rigorous\",\"coherence_um\":{},\"fresnel\":\"{}\"}}",
+            [5.0, 50.0, 500.0][round % 3],
+            ["aluminium", "gold"][round % 2]
+        );
+    }
     format!("{{{}}}", fields.join(","))
 }
 
