@@ -164,7 +164,14 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |int|
    - ``orders`` ``rigorous``: Fourier orders N each side that the solver
      retains, an integer in [5, 200]. (Default: 25, more for periods above
-     2.5 um)
+     2.5 um / ``cover_eta``)
+   - |exposed|
+ * - cover_eta
+   - |float|
+   - ``orders`` ``rigorous``: refractive index of a transparent cover over
+     the grating (a real disc's polycarbonate: 1.58), in [1, 3]: a mirror
+     reflection on top, the orders diffracted inside and let out through
+     it. (Default: 1, no cover)
    - |exposed|
  * - series_tolerance
    - |float|

@@ -1,12 +1,13 @@
-"""render_rigorous: the compact disc of scenes/cd.xml with each order's power
-from Stam's formula (`"orders": "kirchhoff"`, with the default energy
-scaling) and from Maxwell's equations (`"orders": "rigorous"`), side by side
-(docs/rigorous.md, "In a material").
+"""render_rigorous: the compact disc of scenes/cd.xml under the same light with
+each order's power from Stam's formula (`"energy": "stam"`), from the
+energy-conserving formula (the Kirchhoff default) and from Maxwell's
+equations (`"orders": "rigorous"`), side by side (docs/rigorous.md, "In a
+material").
 
     python scripts/render_rigorous.py [--variant scalar_spectral] [--res 256]
         [--spp 64] [--out docs/rigorous_render.png]
 
-Prints each render's time and the disc's mean linear RGB. The rigorous
+Prints each render's time and the image's mean linear RGB. The rigorous
 table is built on the first run (seconds, progress on stderr) and kept on
 disk (STAM_CACHE_DIR).
 """
@@ -26,20 +27,29 @@ import stam_images  # noqa: E402
 SCENE = os.path.join(stam_mitsuba.PROJECT_DIR, 'scenes', 'cd.xml')
 
 
-def scene_text(orders):
-    """cd.xml with the disc's orders set."""
+# (label, the disc's extra string parameters)
+MODES = [
+    ('stam', {'energy': 'stam'}),
+    ('conserving', {}),
+    ('rigorous', {'orders': 'rigorous'}),
+]
+
+
+def scene_text(extra):
+    """cd.xml with the disc's extra string parameters."""
     with open(SCENE) as f:
         text = f.read()
     line = '<string name="surface" value="cd"/>'
     assert line in text
-    return text.replace(line, line + '\n            <string name="orders" value="%s"/>' % orders)
+    lines = ''.join('\n            <string name="%s" value="%s"/>' % kv for kv in extra.items())
+    return text.replace(line, line + lines)
 
 
-def render(mi, orders, res, spp):
-    path = os.path.join(stam_mitsuba.PROJECT_DIR, 'build', 'cd_%s.xml' % orders)
+def render(mi, label, extra, res, spp):
+    path = os.path.join(stam_mitsuba.PROJECT_DIR, 'build', 'cd_%s.xml' % label)
     os.makedirs(os.path.dirname(path), exist_ok=True)
     with open(path, 'w') as f:
-        f.write(scene_text(orders))
+        f.write(scene_text(extra))
     scene = mi.load_file(path, res=res, spp=spp)
     start = time.time()
     image = np.array(mi.render(scene))[..., :3]
@@ -56,19 +66,21 @@ def main():
     args = ap.parse_args()
     mi = stam_mitsuba.setup(args.variant)
     images = []
-    for orders in ('kirchhoff', 'rigorous'):
-        image, seconds = render(mi, orders, args.res, args.spp)
+    for label, extra in MODES:
+        image, seconds = render(mi, label, extra, args.res, args.spp)
         mean = image.reshape(-1, 3).mean(axis=0)
-        print('%-9s %s %dx%d %d spp: %.1f s, mean linear RGB %s'
-              % (orders, args.variant, args.res, args.res, args.spp, seconds,
+        print('%-10s %s %dx%d %d spp: %.1f s, mean linear RGB %s'
+              % (label, args.variant, args.res, args.res, args.spp, seconds,
                  np.array2string(mean, precision=4)))
         images.append(image)
-    # One exposure for both: the Kirchhoff image's.
-    exposure = stam_images.auto_exposure(images[0])
+    # One exposure for all: the rigorous image's.
+    exposure = stam_images.auto_exposure(images[-1])
     gap = np.full((args.res, 4, 3), 1.0 / exposure)
-    stam_images.save_png(args.out, np.concatenate([images[0], gap, images[1]], axis=1),
-                         exposure)
-    print('wrote', args.out, '(left: kirchhoff, right: rigorous)')
+    row = [images[0]]
+    for image in images[1:]:
+        row += [gap, image]
+    stam_images.save_png(args.out, np.concatenate(row, axis=1), exposure)
+    print('wrote', args.out, '(left to right: %s)' % ', '.join(m[0] for m in MODES))
 
 
 if __name__ == '__main__':

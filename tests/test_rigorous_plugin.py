@@ -90,3 +90,30 @@ def test_rigorous_is_refused_with_a_constant_reflectance():
         mi.load_dict({'type': 'diffraction', 'surface': 'cd', 'orders': 'rigorous',
                       'fresnel': 0.9})
     assert 'fresnel' in str(e.value) and 'rigorous' in str(e.value), str(e.value)
+
+
+def test_a_cover_adds_its_mirror_lobe():
+    """`cover_eta`: the plugin's coherent lobe is the cover's Fresnel
+    reflectance (polycarbonate, 1.58: 5.2% at 30 degrees), sampled about as
+    often; the orders keep finite weights."""
+    stam_mitsuba.setup('scalar_rgb')
+    bsdf = mi.load_dict({'type': 'diffraction', **DISC, 'cover_eta': 1.58})
+    ctx = mi.BSDFContext()
+    si = mi.SurfaceInteraction3f()
+    si.wi = mi.Vector3f(0.5, 0.0, math.sqrt(0.75))
+    with stam_core.Brdf(dict(DISC, cover_eta=1.58)) as core:
+        mirror = core.coherent_rgb(np.array([[0.5, 0.0, math.sqrt(0.75)]]))[0]
+    assert mirror == pytest.approx([0.0522] * 3, abs=5e-4)
+    rng = np.random.default_rng(4)
+    specular = 0
+    for _ in range(400):
+        bs, weight = bsdf.sample(ctx, si, rng.random(), mi.Point2f(*rng.random(2)))
+        w = np.array(weight, dtype=np.float64)
+        assert np.all(np.isfinite(w)) and np.all(w >= 0), w
+        if bs.sampled_type & int(mi.BSDFFlags.DeltaReflection):
+            specular += 1
+            assert np.array(bs.wo) == pytest.approx([-0.5, 0.0, math.sqrt(0.75)], abs=1e-6)
+            # mirror / its probability: the RGB strategy takes the cover's
+            # reflectance at its cell's centre (1% off here)
+            assert w == pytest.approx([1.0] * 3, rel=0.05)
+    assert 5 <= specular <= 45, specular

@@ -564,9 +564,13 @@ mod tests {
     /// its range (the keys it depends on set so that they do not refuse it).
     fn base_for(surface: &str, key: &str) -> Map<String, Value> {
         let v = match (surface, key) {
-            ("periodic", "fourier_orders") => json!({"surface": "periodic", "period_um": 1,
-                "coherence_um": 1e4, "profile": "sine", "height_um": 1e-12, "orders": "rigorous"}),
-            ("cd", "fourier_orders") => json!({"surface": "cd", "orders": "rigorous"}),
+            ("periodic", "fourier_orders" | "cover_eta") => {
+                json!({"surface": "periodic", "period_um": 1,
+                "coherence_um": 1e4, "profile": "sine", "height_um": 1e-12, "orders": "rigorous"})
+            }
+            ("cd", "fourier_orders" | "cover_eta") => {
+                json!({"surface": "cd", "orders": "rigorous"})
+            }
             ("gaussian", "corr_x_um" | "corr_y_um") => {
                 json!({"surface": "gaussian", "sigma_um": 1e-6, "corr_x_um": 2, "corr_y_um": 2})
             }
@@ -683,7 +687,7 @@ mod tests {
                     if key.contains('.') {
                         continue;
                     }
-                    let mut m = base_for(surface, "");
+                    let mut m = base_for(surface, key);
                     m.remove(key);
                     let text = Value::Object(m).to_string();
                     let resolved = resolved_json_text(&text).unwrap();

@@ -22,13 +22,14 @@ pub use solver::{
 pub use table::{EfficiencyTable, TableSpec};
 
 /// Fourier orders each side that a material's table retains for a grating
-/// of period `period_um`: 25 (converged to about 1e-3 per order on the
-/// compact disc, docs/rigorous.md), or the orders that propagate at the
-/// band's shortest wavelength (360 nm) plus 18 for longer periods.
-pub fn default_fourier_orders(period_um: f64) -> usize {
-    let propagating = (period_um / 0.36).ceil();
+/// of period `period_um` under a medium of index `cover_eta`: 25 (converged
+/// to about 1e-3 per order on the compact disc, docs/rigorous.md), or the
+/// orders that propagate in that medium at the band's shortest wavelength
+/// (360 nm) plus 18 for longer periods.
+pub fn default_fourier_orders(period_um: f64, cover_eta: f64) -> usize {
+    let propagating = (cover_eta * period_um / 0.36).ceil();
     if propagating.is_finite() && propagating >= 0.0 {
-        (propagating as usize + 18).max(25)
+        (propagating as usize + 18).clamp(25, MAX_ORDERS)
     } else {
         MAX_ORDERS
     }

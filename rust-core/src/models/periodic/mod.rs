@@ -72,7 +72,9 @@ pub(crate) use rgb::OrderWeights;
 pub use sampling::Lobe;
 
 use crate::error::StamError;
-use crate::models::{Shading, SurfaceModel, FLAG_ANISOTROPIC, FLAG_SPECTRALLY_VARYING};
+use crate::models::{
+    Shading, SurfaceModel, FLAG_ANISOTROPIC, FLAG_HAS_COHERENT, FLAG_SPECTRALLY_VARYING,
+};
 use crate::optics::fresnel::{Fresnel, NodeReflectance};
 use crate::optics::geometry::PairGeometry;
 use crate::sampling::{Component, Components};
@@ -113,11 +115,15 @@ impl Periodic {
         }
         let rigorous = match p.orders {
             OrderPowers::Kirchhoff => None,
-            OrderPowers::Rigorous { fourier_orders } => Some(rigorous::RigorousOrders::new(
+            OrderPowers::Rigorous {
+                fourier_orders,
+                cover_eta,
+            } => Some(rigorous::RigorousOrders::new(
                 p.period_um,
                 &p.profile,
                 fresnel,
                 fourier_orders,
+                cover_eta,
             )?),
         };
         Ok(Periodic {
@@ -180,7 +186,9 @@ impl SurfaceModel for Periodic {
     }
 
     fn flags(&self) -> u32 {
-        FLAG_ANISOTROPIC | FLAG_SPECTRALLY_VARYING
+        // A rigorous grating's cover is a mirror: the coherent lobe.
+        let cover = self.rigorous.as_ref().is_some_and(|r| r.has_cover());
+        FLAG_ANISOTROPIC | FLAG_SPECTRALLY_VARYING | if cover { FLAG_HAS_COHERENT } else { 0 }
     }
 
     fn memory_bytes(&self) -> usize {
@@ -212,7 +220,7 @@ impl SurfaceModel for Periodic {
 
     fn unfactored_spectral(&self, geom: &PairGeometry, lambda_nm: f64) -> Option<f64> {
         let r = self.rigorous.as_ref()?;
-        let eta = |n: i64| r.efficiency(n, lambda_nm, geom.wi, geom.wo);
+        let eta = |n: i64| r.power(n, lambda_nm, geom.wi, geom.wo);
         Some(
             self.surface
                 .kernel_given(2.0 * PI / (lambda_nm * 1e-3), geom, &eta),
@@ -221,7 +229,7 @@ impl SurfaceModel for Periodic {
 
     fn unfactored_rgb(&self, geom: &PairGeometry) -> Option<[f64; 3]> {
         let r = self.rigorous.as_ref()?;
-        let eta = |n: i64, lambda_nm: f64| r.efficiency(n, lambda_nm, geom.wi, geom.wo);
+        let eta = |n: i64, lambda_nm: f64| r.power(n, lambda_nm, geom.wi, geom.wo);
         Some(
             self.surface
                 .kernel_rgb_general(geom, OrderWeights::Given(&eta)),
@@ -245,6 +253,20 @@ impl SurfaceModel for Periodic {
             // 0.995): a wider margin.
             target_albedo: GRATING_TARGET_ALBEDO,
         }
+    }
+
+    /// A rigorous grating's cover reflects like a mirror (0 without one).
+    fn coherent_spectral(&self, _shading: &Shading, cos_i: f64, _lambda_nm: f64) -> f64 {
+        self.rigorous
+            .as_ref()
+            .map_or(0.0, |r| r.cover_reflectance(cos_i))
+    }
+
+    /// The cover's reflectance is flat in wavelength: the same in R, G, B.
+    fn coherent_rgb(&self, _shading: &Shading, cos_i: f64) -> [f64; 3] {
+        [self.rigorous
+            .as_ref()
+            .map_or(0.0, |r| r.cover_reflectance(cos_i)); 3]
     }
 
     fn spectral_component(

@@ -25,6 +25,8 @@ pub mod range {
     pub const HEIGHTS_LEN: (usize, usize) = (2, 65536);
     /// Fourier orders each side of the rigorous solver (`fourier_orders`).
     pub const FOURIER_ORDERS: (usize, usize) = (5, crate::rigorous::solver::MAX_ORDERS);
+    /// Index of a transparent cover over a rigorous grating (`cover_eta`).
+    pub const COVER_ETA: (f64, f64) = (1.0, 3.0);
 }
 
 /// Where each order's power comes from (`orders`).
@@ -35,8 +37,11 @@ pub enum OrderPowers {
     /// Maxwell's equations: each order's efficiency from the rigorous
     /// solver (crate::rigorous), tabulated once per grating, with
     /// `fourier_orders` each side (`rigorous::default_fourier_orders` when
-    /// not given).
-    Rigorous { fourier_orders: usize },
+    /// not given), under a transparent cover of index `cover_eta` (1: none).
+    Rigorous {
+        fourier_orders: usize,
+        cover_eta: f64,
+    },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -175,7 +180,16 @@ impl crate::models::ModelParams for PeriodicParams {
                 "Fourier orders each side that the rigorous solver retains",
                 range::FOURIER_ORDERS,
             )
-            .note("orders \"rigorous\"; default 25, more for periods above 2.5 um"),
+            .note("orders \"rigorous\"; default 25, more for periods above 2.5 um / cover_eta"),
+            KeyDoc::number(
+                "cover_eta",
+                "refractive index of a transparent cover over the grating (a real disc's polycarbonate: 1.58)",
+                "",
+                range::COVER_ETA,
+                false,
+            )
+            .default(json!(1.0))
+            .note("orders \"rigorous\"; 1: no cover"),
         ]
     }
 
@@ -206,9 +220,13 @@ impl crate::models::ModelParams for PeriodicParams {
             OrderPowers::Kirchhoff => {
                 out.insert("orders".into(), json!("kirchhoff"));
             }
-            OrderPowers::Rigorous { fourier_orders } => {
+            OrderPowers::Rigorous {
+                fourier_orders,
+                cover_eta,
+            } => {
                 out.insert("orders".into(), json!("rigorous"));
                 out.insert("fourier_orders".into(), json!(fourier_orders));
+                out.insert("cover_eta".into(), json!(cover_eta));
             }
         }
     }
@@ -237,6 +255,7 @@ fn parse_periodic(r: &Reader, compact_disc: bool) -> Result<PeriodicParams, Stam
         "height_um_max",
         "orders",
         "fourier_orders",
+        "cover_eta",
     ])?;
     let defaults = |v: f64| if compact_disc { Some(v) } else { None };
     let period_um = match r.ranged("period_um", range::PERIOD_UM, false, " um")? {
@@ -378,27 +397,41 @@ fn parse_orders(
     height_um_max: Option<f64>,
 ) -> Result<OrderPowers, StamError> {
     let given = r.integer("fourier_orders", range::FOURIER_ORDERS)?;
-    let fourier_orders =
-        given.unwrap_or_else(|| crate::rigorous::default_fourier_orders(period_um));
-    let orders = match r.obj.get("orders") {
-        None => OrderPowers::Kirchhoff,
-        Some(Value::String(s)) if s == "kirchhoff" => OrderPowers::Kirchhoff,
-        Some(Value::String(s)) if s == "rigorous" => OrderPowers::Rigorous { fourier_orders },
+    let cover = r.ranged("cover_eta", range::COVER_ETA, false, "")?;
+    let cover_eta = cover.unwrap_or(1.0);
+    let rigorous = match r.obj.get("orders") {
+        None => false,
+        Some(Value::String(s)) if s == "kirchhoff" => false,
+        Some(Value::String(s)) if s == "rigorous" => true,
         Some(other) => {
             return Err(err(format!(
                 "parameter 'orders' = {other} is not accepted: \"kirchhoff\" (default: Stam's formula) or \"rigorous\" (Maxwell's equations)"
             )))
         }
     };
-    match orders {
-        OrderPowers::Kirchhoff if given.is_some() => Err(err(
-            "parameter 'fourier_orders' applies to \"orders\": \"rigorous\" only".into(),
-        )),
-        OrderPowers::Rigorous { .. } if height_um_max.is_some() => Err(err(
-            "parameter 'height_um_max' (a height texture) cannot be used with \"orders\": \"rigorous\" (its efficiencies are tabulated for one profile)".into(),
-        )),
-        _ => Ok(orders),
+    if !rigorous {
+        for (key, set) in [
+            ("fourier_orders", given.is_some()),
+            ("cover_eta", cover.is_some()),
+        ] {
+            if set {
+                return Err(err(format!(
+                    "parameter '{key}' applies to \"orders\": \"rigorous\" only"
+                )));
+            }
+        }
+        return Ok(OrderPowers::Kirchhoff);
     }
+    if height_um_max.is_some() {
+        return Err(err(
+            "parameter 'height_um_max' (a height texture) cannot be used with \"orders\": \"rigorous\" (its efficiencies are tabulated for one profile)".into(),
+        ));
+    }
+    Ok(OrderPowers::Rigorous {
+        fourier_orders: given
+            .unwrap_or_else(|| crate::rigorous::default_fourier_orders(period_um, cover_eta)),
+        cover_eta,
+    })
 }
 
 fn parse_heights(value: &Value) -> Result<Vec<f64>, StamError> {

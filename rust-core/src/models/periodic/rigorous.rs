@@ -27,6 +27,19 @@
 //! Orders: the solver's m (kx_m = kx + m lambda / Lam for the incident
 //! wave, which travels along -wi) is Stam's -n (u = -(wi.x + wo.x) =
 //! n lambda / Lam at the order).
+//!
+//! A transparent cover of index n (`cover_eta`, a real disc's
+//! polycarbonate) is a flat dielectric interface above the grating, far
+//! enough for its reflections to add as powers: it reflects R(cos_i) (the
+//! unpolarised Fresnel reflectance of the index: a mirror lobe, the
+//! material's coherent lobe), lets 1 - R(cos_i) in, the grating diffracts
+//! inside the medium (the table is solved with the cover as incidence
+//! medium; the tangential wavevector, hence (kx, ky), is the same inside and
+//! out), and an order leaves with 1 - R(cos_o); orders that meet the cover
+//! beyond its critical angle (|k_t| > 1) stay inside. Left out: the light
+//! the cover reflects back onto the grating (R ~ 4-5% of each order, which
+//! would re-diffract) and the polarisation through the two interfaces (each
+//! is taken unpolarised).
 
 use std::sync::Arc;
 
@@ -34,7 +47,7 @@ use glam::DVec3;
 
 use super::Profile;
 use crate::error::StamError;
-use crate::optics::fresnel::Fresnel;
+use crate::optics::fresnel::{conductor_reflectance, Fresnel};
 use crate::rigorous::{table, EfficiencyTable, Grating, Medium, TableSpec};
 use crate::spectrum::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 
@@ -50,6 +63,8 @@ const DISC_EDGE: f64 = 0.9995;
 pub struct RigorousOrders {
     table: Arc<EfficiencyTable>,
     period_um: f64,
+    /// Index of the transparent cover (1: none).
+    cover_eta: f64,
 }
 
 /// The medium of a material's Fresnel term: the solver needs the metal's
@@ -64,8 +79,9 @@ fn medium(fresnel: &Fresnel) -> Result<Medium, String> {
     }
 }
 
-/// The table grid of a material: the band, rows over (lambda, kx).
-pub fn table_spec(fourier_orders: usize) -> TableSpec {
+/// The table grid of a material: the band, rows over (lambda, kx), the
+/// cover (1: none) as the incidence medium.
+pub fn table_spec(fourier_orders: usize, cover_eta: f64) -> TableSpec {
     TableSpec {
         lambda_min_nm: LAMBDA_MIN_NM,
         lambda_max_nm: LAMBDA_MAX_NM,
@@ -73,7 +89,7 @@ pub fn table_spec(fourier_orders: usize) -> TableSpec {
         n_kx: 25,
         nodes_per_gap: 3,
         orders: fourier_orders,
-        cover_eta: 1.0,
+        cover_eta,
     }
 }
 
@@ -86,6 +102,7 @@ impl RigorousOrders {
         profile: &Profile,
         fresnel: &Fresnel,
         fourier_orders: usize,
+        cover_eta: f64,
     ) -> Result<RigorousOrders, StamError> {
         let grating = Grating {
             period_um,
@@ -93,8 +110,33 @@ impl RigorousOrders {
             metal: medium(fresnel).map_err(StamError::new)?,
             slices: SLICES,
         };
-        let table = table::table(&grating, &table_spec(fourier_orders))?;
-        Ok(RigorousOrders { table, period_um })
+        let table = table::table(&grating, &table_spec(fourier_orders, cover_eta))?;
+        Ok(RigorousOrders {
+            table,
+            period_um,
+            cover_eta,
+        })
+    }
+
+    /// The cover's reflectance at an incidence cosine (0 without a cover):
+    /// what its mirror lobe reflects.
+    pub fn cover_reflectance(&self, cos_theta: f64) -> f64 {
+        if self.cover_eta > 1.0 {
+            conductor_reflectance(cos_theta, self.cover_eta, 0.0)
+        } else {
+            0.0
+        }
+    }
+
+    pub fn has_cover(&self) -> bool {
+        self.cover_eta > 1.0
+    }
+
+    /// Order n's power in f for the pair: its efficiency through the
+    /// cover's two interfaces (1 - R in, 1 - R out).
+    pub fn power(&self, n: i64, lambda_nm: f64, wi: DVec3, wo: DVec3) -> f64 {
+        let through = (1.0 - self.cover_reflectance(wi.z)) * (1.0 - self.cover_reflectance(wo.z));
+        through * self.efficiency(n, lambda_nm, wi, wo)
     }
 
     pub fn table(&self) -> &EfficiencyTable {

@@ -271,3 +271,163 @@ fn rigorous_parameters_are_checked_by_name() {
     use crate::material::program::ProgramKind;
     assert!(disc().program(ProgramKind::EvalRgb).is_none());
 }
+
+/// Measurement (docs/rigorous.md): the material's order efficiencies
+/// against direct solves for gratings of three metals, both profiles,
+/// periods 0.5-3 um and depths 0.05-0.3 um, at random incidences (0-80 deg,
+/// any azimuth) and wavelengths (400-700 nm); each order read at its own
+/// centre, as its lobe carries it.
+#[test]
+#[ignore = "measurement: cargo test --release -p stam-core --lib print_grating_sweep -- --ignored --nocapture"]
+fn print_grating_sweep() {
+    let gratings = [
+        ("aluminium", 1.6, "rect", 0.10, 0.6),
+        ("silver", 0.5, "sine", 0.05, 0.0),
+        ("gold", 3.0, "rect", 0.30, 1.0),
+        ("aluminium", 1.0, "sine", 0.20, 0.0),
+        ("gold", 2.0, "sine", 0.15, 0.0),
+        ("silver", 0.8, "rect", 0.08, 0.4),
+    ];
+    for (metal, period, profile, height, width) in gratings {
+        let json = if profile == "rect" {
+            format!(
+                r#"{{"surface":"periodic","period_um":{period},"coherence_um":50,"profile":"rect","height_um":{height},"width_um":{width},"fresnel":"{metal}","orders":"rigorous"}}"#
+            )
+        } else {
+            format!(
+                r#"{{"surface":"periodic","period_um":{period},"coherence_um":50,"profile":"sine","height_um":{height},"fresnel":"{metal}","orders":"rigorous"}}"#
+            )
+        };
+        let start = std::time::Instant::now();
+        let brdf = Brdf::from_json(&json).unwrap();
+        let build = start.elapsed().as_secs_f64();
+        let crate::models::Surface::Periodic(model) = brdf.surface() else {
+            unreachable!()
+        };
+        let r = model.rigorous().unwrap();
+        let grating = Grating {
+            period_um: period,
+            profile: if profile == "rect" {
+                Profile::Rect {
+                    height_um: height,
+                    width_um: width,
+                }
+            } else {
+                Profile::Sine { height_um: height }
+            },
+            metal: Medium::Metal(crate::optics::fresnel::metal_by_name(metal).unwrap()),
+            slices: 16,
+        };
+        let mut rng = crate::benchmark::SplitMix64(17);
+        let mut errors = Vec::new();
+        let mut one_side = Vec::new();
+        let mut worst_total = 0.0f64;
+        for _ in 0..40 {
+            let lambda = 400.0 + 300.0 * rng.next_f64();
+            let wi = direction(80.0 * rng.next_f64(), 360.0 * rng.next_f64());
+            let inc = Incidence {
+                lambda_nm: lambda,
+                theta_rad: wi.z.acos(),
+                phi_rad: (-wi.y).atan2(-wi.x),
+            };
+            let n = crate::rigorous::default_fourier_orders(period, 1.0);
+            let d = solve(&grating.stack(lambda, 1.0), &inc, n).unwrap();
+            let (mut total, mut total_solver) = (0.0, 0.0);
+            for o in &d.reflected {
+                let (x, y) = (-wi.x + o.m as f64 * lambda * 1e-3 / period, -wi.y);
+                let wo = DVec3::new(x, y, (1.0 - x * x - y * y).max(0.0).sqrt());
+                let e = r.efficiency(-o.m, lambda, wi, wo);
+                errors.push((e - o.unpolarised()).abs());
+                let e1 = r.table().efficiency(lambda, -wi.x, -wi.y, o.m);
+                one_side.push((e1 - o.unpolarised()).abs());
+                total += e;
+                total_solver += o.unpolarised();
+            }
+            worst_total = worst_total.max((total - total_solver).abs());
+        }
+        errors.sort_by(f64::total_cmp);
+        one_side.sort_by(f64::total_cmp);
+        let rms1 = (one_side.iter().map(|e| e * e).sum::<f64>() / one_side.len() as f64).sqrt();
+        println!(
+            "  the table at wi alone: max {:.4}, rms {rms1:.4}",
+            one_side.last().unwrap()
+        );
+        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+        let p99 = errors[(0.99 * (errors.len() - 1) as f64) as usize];
+        println!(
+            "{metal} {profile} period {period} height {height}: table {build:.1} s, {} orders: max {:.4}, p99 {p99:.4}, rms {rms:.4}; worst total {worst_total:.4}",
+            errors.len(),
+            errors.last().unwrap()
+        );
+    }
+}
+
+/// A disc under polycarbonate (`cover_eta` 1.58): the cover reflects its
+/// Fresnel reflectance as a mirror (the coherent lobe), and the albedo is
+/// that plus, through both interfaces, the orders the solver (with the
+/// cover as incidence medium) sends out of the cover.
+#[test]
+fn covered_disc_reflects_its_cover_and_the_orders_that_leave() {
+    let eta = 1.58;
+    let brdf = Brdf::from_json(&format!(
+        r#"{{"surface":"cd","fresnel":"aluminium","orders":"rigorous","cover_eta":{eta},"coherence_um":10}}"#
+    ))
+    .unwrap();
+    assert!(brdf.flags() & crate::models::FLAG_HAS_COHERENT != 0);
+    let r = |c: f64| crate::optics::fresnel::conductor_reflectance(c, eta, 0.0);
+    for &(lambda, theta, phi) in &[(550.0, 30.0, 0.0), (450.0, 55.0, 45.0)] {
+        let wi = direction(theta, phi);
+        let mirror = brdf.coherent_spectral(wi, lambda);
+        assert!((mirror - r(wi.z)).abs() < 1e-12, "{mirror} vs {}", r(wi.z));
+        assert!((brdf.coherent_rgb(wi)[1] - r(wi.z)).abs() < 1e-9);
+        // The solver inside the cover: the same tangential wavevector.
+        let sin_inside = (1.0 - wi.z * wi.z).sqrt() / eta;
+        let inc = Incidence {
+            lambda_nm: lambda,
+            theta_rad: sin_inside.asin(),
+            phi_rad: (-wi.y).atan2(-wi.x),
+        };
+        let n = crate::rigorous::default_fourier_orders(CD_PERIOD_UM, eta);
+        let d = solve(&disc_grating().stack(lambda, eta), &inc, n).unwrap();
+        let mut expected = r(wi.z);
+        for o in &d.reflected {
+            let (x, y) = (-wi.x + o.m as f64 * lambda * 1e-3 / CD_PERIOD_UM, -wi.y);
+            if x * x + y * y < 1.0 {
+                let cos_o = (1.0 - x * x - y * y).sqrt();
+                expected += (1.0 - r(wi.z)) * o.unpolarised() * (1.0 - r(cos_o));
+            }
+        }
+        let s = brdf.sampler(wi, Some(lambda));
+        let mut rng = crate::benchmark::SplitMix64(23);
+        let weights: Vec<f64> = (0..40_000)
+            .map(|_| {
+                let x = s.sample(rng.three());
+                if !(x.pdf > 0.0) {
+                    0.0
+                } else if x.coherent {
+                    brdf.coherent_spectral(wi, lambda) / x.pdf
+                } else {
+                    brdf.eval_spectral(wi, x.wo, lambda) * x.wo.z / x.pdf
+                }
+            })
+            .collect();
+        let (mean, var) = mean_var(&weights);
+        let se = (var / weights.len() as f64).sqrt();
+        println!("covered disc {lambda} nm ({theta}, {phi}): albedo {mean:.4} +- {se:.4}, expected {expected:.4}, mirror {mirror:.4}");
+        assert!(mean <= 1.0 + 3.0 * se);
+        assert!(
+            (mean - expected).abs() < 0.03 + 4.0 * se,
+            "{mean} vs {expected}"
+        );
+        // Reciprocity through the cover, and sampling against its pdf.
+        let wo = DVec3::new(-wi.x + 0.22, -wi.y, 0.0);
+        let wo = DVec3::new(wo.x, wo.y, (1.0 - wo.x * wo.x - wo.y * wo.y).sqrt());
+        let (a, b) = (
+            brdf.eval_spectral(wi, wo, lambda),
+            brdf.eval_spectral(wo, wi, lambda),
+        );
+        assert!((a - b).abs() <= 1e-12 * a.max(b));
+        let fit = chi2_fit(&s, 31, 40_000);
+        assert!(fit.p_value > 1e-3, "chi2 p {}", fit.p_value);
+    }
+}

@@ -422,9 +422,10 @@ impl GratingTable {
             })
             .collect();
         let row_cdf = (0..orders).map(|row| cdf[row * stride + bins]).collect();
+        let p_coh = model.coherent_probability(cos_i);
         Component::new(
-            0.0,
-            1.0,
+            p_coh,
+            1.0 - p_coh,
             Some(Lobe::Rainbow(Box::new(RainbowLobe {
                 period_nm: 1000.0 * p.period_um(),
                 coherence_um: p.coherence_um(),
@@ -549,9 +550,10 @@ fn grating_component(
         return Component::cosine_only();
     }
     prob.iter_mut().for_each(|p| *p /= total);
+    let p_coh = model.coherent_probability(wi.z);
     Component::new(
-        0.0,
-        1.0,
+        p_coh,
+        1.0 - p_coh,
         Some(Lobe::Orders(OrdersLobe {
             du,
             sigma,
@@ -589,6 +591,15 @@ impl Periodic {
             None => fresnel.reflectance(cos_i, lambda_nm),
             Some(_) => 1.0,
         }
+    }
+
+    /// The probability of the coherent lobe at an incidence cosine: a
+    /// rigorous grating's cover reflectance (what it reflects as a
+    /// mirror), else 0.
+    fn coherent_probability(&self, cos_i: f64) -> f64 {
+        self.rigorous
+            .as_ref()
+            .map_or(0.0, |r| r.cover_reflectance(cos_i))
     }
 }
 
