@@ -24,13 +24,16 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
+use smallvec::SmallVec;
+
 use super::layers::{Grating, Medium};
 use super::solver::{prepare, Factorisation};
 use crate::optics::profile::Profile;
 use crate::StamError;
 
-/// Bump when the solver's results change: it keys the on-disk cache.
-pub const SOLVER_VERSION: u32 = 1;
+/// Bump when the solver's results or the table's layout change: it keys the
+/// on-disk cache.
+pub const SOLVER_VERSION: u32 = 2;
 
 /// The grid of a table and the solver's truncation.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,7 +41,10 @@ pub struct TableSpec {
     pub lambda_min_nm: f64,
     pub lambda_max_nm: f64,
     pub n_lambda: usize,
-    /// Rows over kx in [-n1, n1].
+    /// Rows over kx in [-n1, n1], uniform. A grating symmetric under
+    /// x -> -x (rect, sine, a symmetric tabulated profile) is built on the
+    /// rows with kx >= 0 alone, n_kx / 2 + 1 of them over [0, n1], and read
+    /// at -kx through eta_m(kx) = eta_-m(-kx).
     pub n_kx: usize,
     /// ky nodes from one anomaly to the next in a row (>= 1).
     pub nodes_per_gap: usize,
@@ -51,9 +57,140 @@ pub struct TableSpec {
 /// One (wavelength, kx) row: efficiencies at ky nodes.
 #[derive(Clone, Debug)]
 struct Row {
+    /// ky^2 at the ends of the row's segments, ascending: from 0 over the
+    /// Rayleigh anomalies inside the incidence disc to its edge (order 0's
+    /// anomaly), each gap between two cut in two (see `Row::layout`).
+    breaks: Vec<f64>,
+    /// Index of the node on each break.
+    first: Vec<u32>,
+    /// Per segment: nodes uniform in sqrt(ky^2 - start) (true: the
+    /// segment above an anomaly) or in sqrt(end - ky^2).
+    rising: Vec<bool>,
     ky: Vec<f64>,
     /// [node][m - m_min].
     values: Vec<f32>,
+}
+
+/// Above an anomaly, the order that just stopped propagating carries a
+/// resonance (a surface wave) within about this much of grazing in
+/// k_t^2 / n1^2: the first part of each gap, sampled densely.
+const RESONANCE_BAND: f64 = 0.1;
+
+/// ky^2 of the breakpoints of a row at (lambda, kx): 0, then every
+/// anomaly 1 - (kx + m lambda / Lam)^2 inside the incidence disc (n1 = 1
+/// units: everything is over n1), ascending; anomalies closer than 1e-9
+/// (orders +-m at kx = 0, say) are one.
+fn row_breaks(step: f64, kx: f64, n1: f64) -> Vec<f64> {
+    let reach = (2.0 * n1 / step).ceil() as i64 + 1;
+    let edge2 = (n1 * n1 - kx * kx).max(0.0);
+    let mut points: Vec<f64> = vec![0.0];
+    for m in -reach..=reach {
+        let k = kx + m as f64 * step;
+        if k.abs() < n1 && k.abs() >= kx.abs() {
+            points.push((n1 * n1 - k * k).min(edge2));
+        }
+    }
+    points.sort_by(f64::total_cmp);
+    let mut merged: Vec<f64> = Vec::with_capacity(points.len());
+    for y in points {
+        match merged.last() {
+            Some(&last) if y - last < 1e-9 => {}
+            _ => merged.push(y),
+        }
+    }
+    merged
+}
+
+impl Row {
+    /// The layout of a row: its segments and ky nodes (values empty). Each
+    /// gap (a, b) between anomalies is cut at c = a + min(RESONANCE_BAND,
+    /// 0.6 (b - a)): over (a, c) the nodes are uniform in sqrt(ky^2 - a),
+    /// the square root of the kink at a and the variable of the resonance
+    /// beside it, `per_gap` of them per 0.25; over (c, b) uniform in
+    /// sqrt(b - ky^2), 2.5 times sparser (the kink at b, nothing sharp).
+    fn layout(step: f64, kx: f64, n1: f64, per_gap: usize) -> Row {
+        let anomalies = row_breaks(step, kx, n1);
+        let h = 0.25 / per_gap as f64;
+        let mut row = Row {
+            breaks: vec![0.0],
+            first: vec![0],
+            rising: Vec::new(),
+            ky: vec![0.0],
+            values: Vec::new(),
+        };
+        for pair in anomalies.windows(2) {
+            let (a, b) = (pair[0], pair[1]);
+            let c = a + (0.6 * (b - a)).min(RESONANCE_BAND);
+            for (p, q, rising, h) in [(a, c, true, h), (c, b, false, 2.5 * h)] {
+                let count = ((q - p).sqrt() / h).ceil().max(1.0) as usize;
+                // A hair inside each anomaly: an order exactly grazing is a limit.
+                let margin = 1e-12 * (b - a);
+                for l in 1..=count {
+                    let u = l as f64 / count as f64;
+                    let y2 = if rising {
+                        p + (q - p) * u * u
+                    } else {
+                        q - (q - p) * (1.0 - u) * (1.0 - u)
+                    };
+                    row.ky.push(y2.clamp(a + margin, b - margin).sqrt());
+                }
+                row.breaks.push(q);
+                row.first.push(row.ky.len() as u32 - 1);
+                row.rising.push(rising);
+            }
+        }
+        row
+    }
+
+    /// Where ky^2 = `y2` falls: the first of four nodes and their weights,
+    /// cubic in the nodes' parameter u (ky^2 = a + (b - a)(1 - cos pi u) / 2
+    /// within a gap (a, b)), in which a square root at an anomaly is a
+    /// straight line. The four nodes stay within the gap (where the
+    /// efficiencies are smooth in u); a gap of fewer intervals is read
+    /// quadratically or linearly.
+    fn place(&self, y2: f64) -> (u32, [f32; 4]) {
+        let n = self.breaks.len();
+        if n < 2 {
+            return (0, [1.0, 0.0, 0.0, 0.0]);
+        }
+        let g = self.breaks.partition_point(|&b| b <= y2).clamp(1, n - 1) - 1;
+        let (a, b) = (self.breaks[g], self.breaks[g + 1]);
+        let t = if b > a {
+            ((y2 - a) / (b - a)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let (i0, i1) = (self.first[g] as usize, self.first[g + 1] as usize);
+        let count = i1 - i0;
+        let u = if self.rising[g] {
+            t.sqrt()
+        } else {
+            1.0 - (1.0 - t).sqrt()
+        };
+        let x = u * count as f64;
+        let points = (count + 1).min(4);
+        let start = ((x as usize).saturating_sub(1)).min(count + 1 - points);
+        let s = x - start as f64;
+        let w = match points {
+            4 => [
+                -(s - 1.0) * (s - 2.0) * (s - 3.0) / 6.0,
+                s * (s - 2.0) * (s - 3.0) / 2.0,
+                -s * (s - 1.0) * (s - 3.0) / 2.0,
+                s * (s - 1.0) * (s - 2.0) / 6.0,
+            ],
+            3 => [
+                (s - 1.0) * (s - 2.0) / 2.0,
+                -s * (s - 2.0),
+                s * (s - 1.0) / 2.0,
+                0.0,
+            ],
+            _ => [1.0 - s, s, 0.0, 0.0],
+        };
+        (
+            (i0 + start) as u32,
+            [w[0] as f32, w[1] as f32, w[2] as f32, w[3] as f32],
+        )
+    }
 }
 
 /// Unpolarised efficiencies of orders m_min..=m_max; zero where an order
@@ -64,62 +201,26 @@ pub struct EfficiencyTable {
     pub m_min: i64,
     pub m_max: i64,
     period_um: f64,
+    /// Rows only for kx >= 0, read at -kx by symmetry.
+    symmetric: bool,
     /// [lambda][kx].
     rows: Vec<Row>,
     /// Seconds the build took (0 when read from the disk cache).
     pub build_seconds: f64,
 }
 
-/// The anomalies of a row up to the incidence disc's edge, ascending in ky:
-/// (ky, the orders grazing there); the first is (0, []), the last
-/// (ky_0, [0, ...]).
-fn breakpoints(lambda_nm: f64, period_um: f64, kx: f64, n1: f64) -> Vec<(f64, Vec<i64>)> {
-    let step = lambda_nm * 1e-3 / period_um;
-    let reach = (2.0 * n1 / step).ceil() as i64 + 1;
-    // Beyond the disc's edge ky_0 no light arrives: anomalies there do not count.
-    let edge = (n1 * n1 - kx * kx).max(0.0).sqrt();
-    let mut points: Vec<(f64, Vec<i64>)> = vec![(0.0, Vec::new())];
-    for m in -reach..=reach {
-        let k = kx + m as f64 * step;
-        if k.abs() < n1 {
-            let ky = (n1 * n1 - k * k).sqrt();
-            if ky <= edge {
-                points.push((ky, vec![m]));
-            }
-        }
-    }
-    points.sort_by(|a, b| a.0.total_cmp(&b.0));
-    // Merge anomalies closer than 1e-9 (orders +-m at kx = 0, say).
-    let mut merged: Vec<(f64, Vec<i64>)> = Vec::with_capacity(points.len());
-    for (ky, ms) in points {
-        match merged.last_mut() {
-            Some(last) if ky - last.0 < 1e-9 => last.1.extend(ms),
-            _ => merged.push((ky, ms)),
-        }
-    }
-    merged
-}
-
-/// ky nodes of a row: `per_gap` per gap between breakpoints, 1 - cos spaced,
-/// a hair inside each gap's ends (an order exactly grazing is a limit).
-fn row_nodes(points: &[(f64, Vec<i64>)], per_gap: usize) -> Vec<f64> {
-    let mut nodes = Vec::new();
-    for pair in points.windows(2) {
-        let (a, b) = (pair[0].0, pair[1].0);
-        let margin = 1e-12 * (b - a);
-        for l in 0..=per_gap {
-            if l == 0 && !nodes.is_empty() {
-                continue;
-            }
-            let t = 0.5 * (1.0 - (std::f64::consts::PI * l as f64 / per_gap as f64).cos());
-            let y = a + (b - a) * t;
-            nodes.push(y.clamp(
-                a + if pair[0].1.is_empty() { 0.0 } else { margin },
-                b - margin,
-            ));
-        }
-    }
-    nodes
+/// Where a query reads the table: up to four rows, each with a weight, a
+/// node and the weight of the node after it; `mirror` when read at -kx and
+/// order -m.
+#[derive(Clone, Copy, Debug)]
+struct Lookup {
+    mirror: bool,
+    /// ky^2 each row is read at (diagnosis).
+    #[cfg(test)]
+    y2: [f64; 4],
+    reads: [(u32, [f32; 4]); 4],
+    weights: [f64; 4],
+    rows: [u32; 4],
 }
 
 fn node(min: f64, max: f64, n: usize, i: usize) -> f64 {
@@ -130,14 +231,54 @@ fn node(min: f64, max: f64, n: usize, i: usize) -> f64 {
     }
 }
 
+/// (cell, fraction) of `x` on `n` uniform nodes over [min, max].
+fn cell(x: f64, min: f64, max: f64, n: usize) -> (usize, f64) {
+    if n < 2 || !(max > min) {
+        return (0, 0.0);
+    }
+    let t = ((x - min) / (max - min) * (n - 1) as f64).clamp(0.0, (n - 1) as f64);
+    let i = (t as usize).min(n - 2);
+    (i, t - i as f64)
+}
+
+/// Anomalies a little outside the disc (|kx + m lambda / Lam| up to
+/// sqrt(n1^2 + VIRTUAL)) still bring their order's resonance into it.
+const VIRTUAL: f64 = 0.15;
+
+/// How far (in ky^2 / n1^2) a row's reading may fall off the row before it
+/// stops counting (see `EfficiencyTable::locate`).
+const OFF_ROW: f64 = 0.02;
+
+/// smoothstep: 0 and 1 with zero slope at both ends.
+fn smooth(t: f64) -> f64 {
+    let t = t.clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
 impl EfficiencyTable {
     pub fn lambda_nm(&self, i: usize) -> f64 {
         let s = &self.spec;
         node(s.lambda_min_nm, s.lambda_max_nm, s.n_lambda, i)
     }
 
-    pub fn kx(&self, i: usize) -> f64 {
-        node(-self.spec.cover_eta, self.spec.cover_eta, self.spec.n_kx, i)
+    /// Rows over kx: n_kx, or n_kx / 2 + 1 over [0, n1] for a symmetric
+    /// grating.
+    pub fn n_kx_rows(&self) -> usize {
+        kx_rows(&self.spec, self.symmetric)
+    }
+
+    /// kx of row ix (the row was solved just inside the disc at kx = +-n1).
+    /// Rows are uniform in v over [-1, 1] ([0, 1] for a symmetric grating),
+    /// kx = n1 sin(c v) / sin(c): denser towards the disc's edge, where the
+    /// rows are short and grazing incidence changes fast.
+    pub fn kx(&self, ix: usize) -> f64 {
+        let lo = if self.symmetric { 0.0 } else { -1.0 };
+        self.spec.cover_eta * kx_of(node(lo, 1.0, self.n_kx_rows(), ix))
+    }
+
+    /// Whether the table holds kx >= 0 alone (a symmetric grating).
+    pub fn symmetric(&self) -> bool {
+        self.symmetric
     }
 
     fn orders(&self) -> usize {
@@ -145,7 +286,7 @@ impl EfficiencyTable {
     }
 
     fn row(&self, il: usize, ix: usize) -> &Row {
-        &self.rows[il * self.spec.n_kx + ix]
+        &self.rows[il * self.n_kx_rows() + ix]
     }
 
     /// The ky nodes of row (il, ix).
@@ -153,11 +294,16 @@ impl EfficiencyTable {
         &self.row(il, ix).ky
     }
 
+    /// ky nodes in the whole table (each one solve).
+    pub fn node_count(&self) -> usize {
+        self.rows.iter().map(|r| r.ky.len()).sum()
+    }
+
     /// Memory held by the values and nodes.
     pub fn memory_bytes(&self) -> usize {
         self.rows
             .iter()
-            .map(|r| r.values.len() * 4 + r.ky.len() * 8)
+            .map(|r| r.values.len() * 4 + r.ky.len() * 8 + r.breaks.len() * 13)
             .sum()
     }
 
@@ -175,102 +321,225 @@ impl EfficiencyTable {
         self.kx(ix).clamp(-0.9995 * n1, 0.9995 * n1)
     }
 
-    /// Order m along row (il, ix) at `ky`: linear in the nodes' parameter u
-    /// (ky = a + (b - a)(1 - cos pi u) / 2 within the gap (a, b)), in which a
-    /// square root at an anomaly is a straight line.
-    fn along_row(&self, il: usize, ix: usize, ky: f64, k: usize) -> f64 {
-        let row = self.row(il, ix);
-        let n = row.ky.len();
-        if n == 0 {
-            return 0.0;
-        }
-        let orders = self.orders();
-        let at = |i: usize| row.values[i * orders + k] as f64;
-        let points = breakpoints(
-            self.lambda_nm(il),
-            self.period_um,
-            self.row_kx(ix),
-            self.spec.cover_eta,
-        );
-        let per_gap = self.spec.nodes_per_gap;
-        if points.len() < 2 || (points.len() - 1) * per_gap + 1 != n {
-            return at(0);
-        }
-        let g = points
-            .partition_point(|p| p.0 <= ky)
-            .clamp(1, points.len() - 1)
-            - 1;
-        let (a, b) = (points[g].0, points[g + 1].0);
-        let t = if b > a {
-            ((ky - a) / (b - a)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let x = (g as f64 + (1.0 - 2.0 * t).acos() / std::f64::consts::PI) * per_gap as f64;
-        let i = (x.floor() as usize).min(n - 2);
-        let w = x - i as f64;
-        at(i) + w * (at(i + 1) - at(i))
+    fn step(&self, lambda_nm: f64) -> f64 {
+        lambda_nm * 1e-3 / self.period_um
     }
 
-    /// Efficiency of order m at (lambda, kx, ky): bilinear over the four
-    /// rows around (lambda, kx), each read at the query's place between its
-    /// two neighbouring anomalies (see the module comment).
+    /// The rows around (lambda, kx, ky) and where to read each: bilinear
+    /// over (lambda, kx); each row is read at ky'^2 = ky^2 + a shift that
+    /// carries the query's neighbouring anomalies (orders a below and b
+    /// above) onto the same orders' anomalies in that row, and blends the
+    /// two shifts with a smoothstep in between: next to an anomaly the row
+    /// is read at the same distance k_t^2 - n1^2 of that order from grazing,
+    /// so the kink and the resonance beside it stay where they are.
+    fn locate(&self, lambda_nm: f64, kx: f64, ky: f64) -> Lookup {
+        let s = &self.spec;
+        let n1 = s.cover_eta;
+        let mirror = self.symmetric && kx < 0.0;
+        let kx = if mirror { -kx } else { kx }.clamp(-0.9995 * n1, 0.9995 * n1);
+        let lambda = lambda_nm.clamp(s.lambda_min_nm, s.lambda_max_nm);
+        let edge2 = n1 * n1 - kx * kx;
+        let y2 = (ky * ky).min(edge2);
+        let step = self.step(lambda);
+        // The query's anomalies: (order, ky^2 where it grazes, weight).
+        // Each row is read at ky^2 plus the shifts that carry these onto the
+        // same orders' anomalies in that row, averaged with weights
+        // 1 / (distance in ky^2)^2: at an anomaly, that anomaly's shift.
+        let mut anomalies: SmallVec<[(i64, f64, f64); 32]> = SmallVec::new();
+        let reach = (n1 * n1 + VIRTUAL).sqrt();
+        let m_first = ((-reach - kx) / step).ceil() as i64;
+        let m_last = ((reach - kx) / step).floor() as i64;
+        let mut total = 0.0;
+        for m in m_first..=m_last {
+            let k = kx + m as f64 * step;
+            if k.abs() < kx.abs() && m != 0 {
+                continue;
+            }
+            let a = n1 * n1 - k * k;
+            // Anomalies outside the disc fade out by VIRTUAL.
+            let fade = if a >= 0.0 {
+                1.0
+            } else {
+                smooth(1.0 + a / VIRTUAL)
+            };
+            let d = y2 - a;
+            let weight = fade / (d * d + 1e-24);
+            if weight > 0.0 {
+                anomalies.push((m, a, weight));
+                total += weight;
+            }
+        }
+        let nx = self.n_kx_rows();
+        let (il, tl) = cell(lambda, s.lambda_min_nm, s.lambda_max_nm, s.n_lambda);
+        let v_min = if self.symmetric { 0.0 } else { -1.0 };
+        let (ix, tx) = cell(v_of(kx / n1), v_min, 1.0, nx);
+        let next = |i: usize, n: usize| if n < 2 { i } else { (i + 1).min(n - 1) };
+        let mut out = Lookup {
+            mirror,
+            reads: [(0, [0.0; 4]); 4],
+            #[cfg(test)]
+            y2: [0.0; 4],
+            weights: [0.0; 4],
+            rows: [0; 4],
+        };
+        let mut slot = 0;
+        let mut fit = [1.0f64; 4];
+        for (jl, wl) in [(il, 1.0 - tl), (next(il, s.n_lambda), tl)] {
+            for (jx, wx) in [(ix, 1.0 - tx), (next(ix, nx), tx)] {
+                let weight = wl * wx;
+                let r = jl * nx + jx;
+                let (row_step, row_kx) = (self.step(self.lambda_nm(jl)), self.row_kx(jx));
+                let there = |m: i64| {
+                    let k = row_kx + m as f64 * row_step;
+                    n1 * n1 - k * k
+                };
+                let mut shift = 0.0;
+                for &(m, a, weight) in &anomalies {
+                    shift += weight * (there(m) - a);
+                }
+                let y2_there = y2 + shift / total;
+                let edge_there = n1 * n1 - row_kx * row_kx;
+                out.reads[slot] = self.rows[r].place(y2_there.clamp(0.0, edge_there));
+                #[cfg(test)]
+                {
+                    out.y2[slot] = y2_there.clamp(0.0, edge_there);
+                }
+                out.weights[slot] = weight;
+                out.rows[slot] = r as u32;
+                // How well the row holds the query's place: not at all when
+                // the shifted ky^2 falls off the row by more than OFF_ROW
+                // (an anomaly that the row lacks, or a row nearer the disc's
+                // edge than the query's |k_t|).
+                let off = (-y2_there).max(y2_there - edge_there).max(0.0);
+                fit[slot] = smooth(1.0 - off / OFF_ROW);
+                slot += 1;
+            }
+        }
+        // Hand the weight of a row that does not hold the query to its
+        // neighbour in kx, else in lambda (continuously, by `fit`).
+        for (from, to) in [
+            (0, 1),
+            (1, 0),
+            (2, 3),
+            (3, 2),
+            (0, 2),
+            (2, 0),
+            (1, 3),
+            (3, 1),
+        ] {
+            if fit[to] > fit[from] {
+                let moved = out.weights[from] * (fit[to] - fit[from]);
+                out.weights[from] -= moved;
+                out.weights[to] += moved;
+            }
+        }
+        out
+    }
+
+    /// The rows a query reads: (lambda, kx, ky, weight, value of order m
+    /// read there) in the frame of the rows (kx >= 0 when mirrored, and
+    /// order -m).
+    #[cfg(test)]
+    pub(super) fn reads(&self, lambda_nm: f64, kx: f64, ky: f64, m: i64) -> Vec<[f64; 5]> {
+        let at = self.locate(lambda_nm, kx, ky);
+        let m = if at.mirror { -m } else { m };
+        let nx = self.n_kx_rows();
+        (0..4)
+            .map(|slot| {
+                let r = at.rows[slot] as usize;
+                let mut one = at;
+                one.weights = [0.0; 4];
+                one.weights[slot] = 1.0;
+                [
+                    self.lambda_nm(r / nx),
+                    self.row_kx(r % nx),
+                    at.y2[slot].sqrt(),
+                    at.weights[slot],
+                    self.read(&one, (m - self.m_min) as usize),
+                ]
+            })
+            .collect()
+    }
+
+    /// Order k = m - m_min at a located query.
+    fn read(&self, at: &Lookup, k: usize) -> f64 {
+        let orders = self.orders();
+        let mut sum = 0.0;
+        for slot in 0..4 {
+            let weight = at.weights[slot];
+            if weight == 0.0 {
+                continue;
+            }
+            let row = &self.rows[at.rows[slot] as usize];
+            let (i, w) = at.reads[slot];
+            let i = i as usize;
+            let mut v = 0.0f32;
+            for (j, wj) in w.iter().enumerate() {
+                if *wj != 0.0 {
+                    v += wj * row.values[(i + j) * orders + k];
+                }
+            }
+            sum += weight * v as f64;
+        }
+        // Cubic weights can overshoot a sharp peak a little.
+        sum.clamp(0.0, 1.0)
+    }
+
+    /// Efficiency of order m at (lambda, kx, ky), (kx, ky) the incident
+    /// tangential wavevector over k0: bilinear over the four rows around
+    /// (lambda, kx), each read with its anomalies carried onto the query's
+    /// (see `locate`). Wavelengths outside the table read its ends.
     pub fn efficiency(&self, lambda_nm: f64, kx: f64, ky: f64, m: i64) -> f64 {
+        let at = self.locate(lambda_nm, kx, ky);
+        let m = if at.mirror { -m } else { m };
         if m < self.m_min || m > self.m_max {
             return 0.0;
         }
-        let s = &self.spec;
-        let n1 = s.cover_eta;
-        let ky = ky.abs();
-        let cell = |x: f64, min: f64, max: f64, n: usize| -> (usize, f64) {
-            if n < 2 {
-                return (0, 0.0);
-            }
-            let t = ((x - min) / (max - min) * (n - 1) as f64).clamp(0.0, (n - 1) as f64);
-            let i = (t.floor() as usize).min(n - 2);
-            (i, t - i as f64)
-        };
-        let (il, tl) = cell(lambda_nm, s.lambda_min_nm, s.lambda_max_nm, s.n_lambda);
-        let (ix, tx) = cell(kx, -n1, n1, s.n_kx);
-        let step = |i: usize, n: usize| if n < 2 { 0 } else { (i + 1).min(n - 1) };
-        // The query's two neighbouring anomalies and its place between them.
-        let here = breakpoints(lambda_nm, self.period_um, kx, n1);
-        let j = here
-            .partition_point(|p| p.0 <= ky)
-            .clamp(1, here.len().max(2) - 1);
-        let (lo, hi) = (&here[j - 1], &here[j.min(here.len() - 1)]);
-        let t = if hi.0 > lo.0 {
-            ((ky - lo.0) / (hi.0 - lo.0)).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let k = (m - self.m_min) as usize;
-        let mut sum = 0.0;
-        for (jl, wl) in [(il, 1.0 - tl), (step(il, s.n_lambda), tl)] {
-            for (jx, wx) in [(ix, 1.0 - tx), (step(ix, s.n_kx), tx)] {
-                let w = wl * wx;
-                if w == 0.0 {
-                    continue;
-                }
-                let there = breakpoints(self.lambda_nm(jl), self.period_um, self.row_kx(jx), n1);
-                let find = |labels: &Vec<i64>| -> Option<f64> {
-                    if labels.is_empty() {
-                        return Some(0.0);
-                    }
-                    there
-                        .iter()
-                        .find(|p| p.1.iter().any(|l| labels.contains(l)))
-                        .map(|p| p.0)
-                };
-                // The same two anomalies in that row, else the same ky.
-                let ky_there = match (find(&lo.1), find(&hi.1)) {
-                    (Some(a), Some(b)) if b > a => a + t * (b - a),
-                    _ => ky,
-                };
-                sum += w * self.along_row(jl, jx, ky_there, k);
-            }
+        self.read(&at, (m - self.m_min) as usize)
+    }
+
+    /// Every order's efficiency at (lambda, kx, ky) at once: out[m - m_min]
+    /// for m in m_min..=m_max (out must hold m_max - m_min + 1 values).
+    pub fn efficiencies(&self, lambda_nm: f64, kx: f64, ky: f64, out: &mut [f64]) {
+        let at = self.locate(lambda_nm, kx, ky);
+        let orders = self.orders();
+        for (k, o) in out.iter_mut().enumerate().take(orders) {
+            // m_min = -m_max: order m at -kx is order -m here.
+            let kk = if at.mirror { orders - 1 - k } else { k };
+            *o = self.read(&at, kk);
         }
-        sum
+    }
+}
+
+/// The rows' warp of kx (see `EfficiencyTable::kx`).
+const KX_WARP: f64 = 1.2;
+
+fn kx_of(v: f64) -> f64 {
+    (KX_WARP * v).sin() / KX_WARP.sin()
+}
+
+fn v_of(kx: f64) -> f64 {
+    (kx * KX_WARP.sin()).clamp(-1.0, 1.0).asin() / KX_WARP
+}
+
+fn kx_rows(spec: &TableSpec, symmetric: bool) -> usize {
+    if symmetric {
+        spec.n_kx / 2 + 1
+    } else {
+        spec.n_kx
+    }
+}
+
+/// Whether a grating's profile is its own mirror image (x -> c - x for some
+/// c): then eta_m(lambda, kx, ky) = eta_-m(lambda, -kx, ky).
+pub fn is_symmetric(grating: &Grating) -> bool {
+    match &grating.profile {
+        Profile::Rect { .. } | Profile::Sine { .. } => true,
+        Profile::Tabulated { heights_um } => {
+            // Linear between samples: mirrored about a sample or a midpoint.
+            let n = heights_um.len();
+            (0..n).any(|s| (0..n).all(|i| heights_um[(s + n - i) % n] == heights_um[i]))
+        }
     }
 }
 
@@ -308,6 +577,12 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
             spec.lambda_min_nm, spec.lambda_max_nm
         )));
     }
+    if !(spec.cover_eta >= 1.0 && spec.cover_eta < 10.0) {
+        return Err(StamError::new(format!(
+            "rigorous table: cover_eta must be in [1, 10), got {}",
+            spec.cover_eta
+        )));
+    }
     let n1 = spec.cover_eta;
     // Orders that can propagate anywhere on the grid: |kx + m lambda / Lam| < n1.
     let m_reach = (2.0 * n1 * grating.period_um / (spec.lambda_min_nm * 1e-3)).ceil() as i64;
@@ -316,12 +591,33 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
         m_min: -m_reach,
         m_max: m_reach,
         period_um: grating.period_um,
+        symmetric: is_symmetric(grating),
         rows: Vec::new(),
         build_seconds: 0.0,
     };
-    let rows: Vec<(usize, usize)> = (0..spec.n_lambda)
-        .flat_map(|il| (0..spec.n_kx).map(move |ix| (il, ix)))
+    let nx = table.n_kx_rows();
+    let mut rows: Vec<(usize, usize)> = (0..spec.n_lambda)
+        .flat_map(|il| (0..nx).map(move |ix| (il, ix)))
         .collect();
+    // The longest rows first: the threads finish together.
+    let layout = |il: usize, ix: usize| {
+        Row::layout(
+            table.step(table.lambda_nm(il)),
+            table.row_kx(ix),
+            n1,
+            spec.nodes_per_gap,
+        )
+    };
+    let cost: Vec<usize> = rows
+        .iter()
+        .map(|&(il, ix)| layout(il, ix).ky.len())
+        .collect();
+    let order: Vec<usize> = {
+        let mut o: Vec<usize> = (0..rows.len()).collect();
+        o.sort_by_key(|&r| std::cmp::Reverse(cost[r]));
+        o
+    };
+    rows = order.iter().map(|&r| rows[r]).collect();
     let start = Instant::now();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let last_report = Mutex::new(0.0f64);
@@ -338,7 +634,7 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
                 }
                 let (il, ix) = rows[r];
                 match solve_row(grating, &table, il, ix) {
-                    Ok(row) => results.lock().unwrap().push((r, row)),
+                    Ok(row) => results.lock().unwrap().push((il * nx + ix, row)),
                     Err(e) => {
                         *first_error.lock().unwrap() = Some(e);
                         break;
@@ -378,11 +674,10 @@ fn solve_row(
     let spec = &table.spec;
     let n1 = spec.cover_eta;
     let lambda = table.lambda_nm(il);
-    let kx = table.kx(ix).clamp(-0.9995 * n1, 0.9995 * n1);
-    let points = breakpoints(lambda, grating.period_um, kx, n1);
-    let ky = row_nodes(&points, spec.nodes_per_gap);
+    let kx = table.row_kx(ix);
+    let mut row = Row::layout(table.step(lambda), kx, n1, spec.nodes_per_gap);
     let orders = table.orders();
-    let mut values = vec![0.0f32; ky.len() * orders];
+    row.values = vec![0.0f32; row.ky.len() * orders];
     let prepared = prepare(
         &grating.stack(lambda, n1),
         lambda,
@@ -390,15 +685,15 @@ fn solve_row(
         spec.orders,
         Factorisation::Li,
     )?;
-    for (iy, &y) in ky.iter().enumerate() {
+    for (iy, &y) in row.ky.iter().enumerate() {
         let d = prepared.solve(y);
         for o in &d.reflected {
             if o.m >= table.m_min && o.m <= table.m_max {
-                values[iy * orders + (o.m - table.m_min) as usize] = o.unpolarised() as f32;
+                row.values[iy * orders + (o.m - table.m_min) as usize] = o.unpolarised() as f32;
             }
         }
     }
-    Ok(Row { ky, values })
+    Ok(row)
 }
 
 /// Where tables are kept between processes: $STAM_CACHE_DIR, else
@@ -436,6 +731,7 @@ fn write_cache(key: &str, table: &EfficiencyTable) -> std::io::Result<()> {
     bytes.extend_from_slice(&table.m_min.to_le_bytes());
     bytes.extend_from_slice(&table.m_max.to_le_bytes());
     bytes.extend_from_slice(&table.period_um.to_le_bytes());
+    bytes.push(table.symmetric as u8);
     bytes.extend_from_slice(&(table.rows.len() as u64).to_le_bytes());
     for row in &table.rows {
         bytes.extend_from_slice(&(row.ky.len() as u64).to_le_bytes());
@@ -472,32 +768,46 @@ pub fn table_from_disk(key: &str, spec: &TableSpec) -> Option<EfficiencyTable> {
     let m_min = i64::from_le_bytes(take(8)?.try_into().ok()?);
     let m_max = i64::from_le_bytes(take(8)?.try_into().ok()?);
     let period_um = f64::from_le_bytes(take(8)?.try_into().ok()?);
+    let symmetric = take(1)?[0] != 0;
     let n_rows = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
     let orders = usize::try_from(m_max - m_min + 1).ok()?;
-    if n_rows != spec.n_lambda * spec.n_kx {
-        return None;
-    }
-    let mut rows = Vec::with_capacity(n_rows);
-    for _ in 0..n_rows {
-        let n = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-        let ky = take(8 * n)?
-            .chunks_exact(8)
-            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-            .collect();
-        let values = take(4 * n * orders)?
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
-        rows.push(Row { ky, values });
-    }
-    Some(EfficiencyTable {
+    let mut table = EfficiencyTable {
         spec: spec.clone(),
         m_min,
         m_max,
         period_um,
-        rows,
+        symmetric,
+        rows: Vec::new(),
         build_seconds: 0.0,
-    })
+    };
+    if n_rows != spec.n_lambda * table.n_kx_rows() {
+        return None;
+    }
+    let mut rows = Vec::with_capacity(n_rows);
+    for r in 0..n_rows {
+        let n = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+        let (il, ix) = (r / table.n_kx_rows(), r % table.n_kx_rows());
+        let mut row = Row::layout(
+            table.step(table.lambda_nm(il)),
+            table.row_kx(ix),
+            spec.cover_eta,
+            spec.nodes_per_gap,
+        );
+        let ky: Vec<f64> = take(8 * n)?
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect();
+        if ky != row.ky {
+            return None;
+        }
+        row.values = take(4 * n * orders)?
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect();
+        rows.push(row);
+    }
+    table.rows = rows;
+    Some(table)
 }
 
 type Cache = Mutex<HashMap<String, Arc<EfficiencyTable>>>;

@@ -345,7 +345,7 @@ fn a_table_holds_the_solver_at_its_nodes_and_interpolates_between() {
     let spec = small_spec(12);
     let t = table::build(&g, &spec).unwrap();
     let mut worst_node = 0.0f64;
-    for (il, ix) in [(0, 4), (1, 2), (2, 6), (1, 5)] {
+    for (il, ix) in [(0, 3), (1, 2), (2, 0), (1, 1)] {
         let (lambda, kx) = (t.lambda_nm(il), t.kx(ix));
         let p = prepare(&g.stack(lambda, 1.0), lambda, kx, 12, Factorisation::Li).unwrap();
         let nodes = t.ky_nodes(il, ix).to_vec();
@@ -371,9 +371,9 @@ fn a_table_holds_the_solver_at_its_nodes_and_interpolates_between() {
     println!("largest difference at nodes {worst_node:.1e}");
     assert!(worst_node < 1e-6);
     // Each row's nodes rise from 0 to the incidence disc's edge.
-    let nodes = t.ky_nodes(1, 4);
+    let nodes = t.ky_nodes(1, 2);
     assert!(nodes.windows(2).all(|w| w[1] > w[0]) && nodes[0] == 0.0);
-    assert!((nodes[nodes.len() - 1] - (1.0 - t.kx(4).powi(2)).sqrt()).abs() < 1e-6);
+    assert!((nodes[nodes.len() - 1] - (1.0 - t.kx(2).powi(2)).sqrt()).abs() < 1e-6);
 }
 
 #[test]
@@ -389,7 +389,7 @@ fn tables_are_kept_in_memory_and_on_disk() {
     let from_disk = table::table_from_disk(&key, &spec).expect("the table was written");
     assert_eq!(from_disk.m_min, first.m_min);
     for il in 0..3 {
-        for ix in 0..9 {
+        for ix in 0..first.n_kx_rows() {
             assert_eq!(from_disk.ky_nodes(il, ix), first.ky_nodes(il, ix));
             for iy in 0..first.ky_nodes(il, ix).len() {
                 for m in first.m_min..=first.m_max {
@@ -408,17 +408,94 @@ fn tables_are_kept_in_memory_and_on_disk() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Random incidences for table checks: (lambda, kx, ky), up to `max_deg`
+/// from the normal at any azimuth (ky >= 0 or not).
+fn random_incidences(count: usize, lambda: (f64, f64), max_deg: f64) -> Vec<(f64, f64, f64)> {
+    let mut rng = 0x2545F4914F6CDD1Du64;
+    let mut uniform = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..count)
+        .map(|_| {
+            let l = lambda.0 + (lambda.1 - lambda.0) * uniform();
+            let theta = (max_deg * uniform()).to_radians();
+            let phi = (360.0 * uniform()).to_radians();
+            (l, theta.sin() * phi.cos(), theta.sin() * phi.sin())
+        })
+        .collect()
+}
+
+/// Per-order errors of a table against direct solves at the same
+/// truncation: (error, lambda, kx, ky, m, table, solver) for every
+/// propagating order of every incidence.
+fn table_errors(
+    g: &Grating,
+    t: &EfficiencyTable,
+    incidences: &[(f64, f64, f64)],
+) -> Vec<(f64, f64, f64, f64, i64, f64, f64)> {
+    let mut out = Vec::new();
+    let mut all = vec![0.0; (t.m_max - t.m_min + 1) as usize];
+    for &(lambda, kx, ky) in incidences {
+        let d = prepare(
+            &g.stack(lambda, 1.0),
+            lambda,
+            kx,
+            t.spec.orders,
+            Factorisation::Li,
+        )
+        .unwrap()
+        .solve(ky);
+        t.efficiencies(lambda, kx, ky, &mut all);
+        for o in &d.reflected {
+            let e = t.efficiency(lambda, kx, ky, o.m);
+            assert_eq!(e, all[(o.m - t.m_min) as usize]);
+            out.push((
+                (e - o.unpolarised()).abs(),
+                lambda,
+                kx,
+                ky,
+                o.m,
+                e,
+                o.unpolarised(),
+            ));
+        }
+    }
+    out
+}
+
+/// (max, rms, 99th percentile) of errors.
+fn error_summary(errors: &[(f64, f64, f64, f64, i64, f64, f64)]) -> (f64, f64, f64) {
+    let mut e: Vec<f64> = errors.iter().map(|x| x.0).collect();
+    e.sort_by(f64::total_cmp);
+    let rms = (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt();
+    let p99 = e[((e.len() as f64 * 0.99) as usize).min(e.len() - 1)];
+    (e[e.len() - 1], rms, p99)
+}
+
 /// Interpolation error of a compact-disc table against direct solves at
 /// random incidences (same truncation), and its build time. Grid from
-/// STAM_TABLE="n_lambda,n_kx,nodes_per_gap,orders" (default 12,25,3,25).
+/// STAM_TABLE="n_lambda,n_kx,nodes_per_gap,orders" (default 12,25,3,25),
+/// STAM_TABLE_CASES incidences (default 150).
 #[test]
 #[ignore = "measurement: STAM_TABLE=12,25,3,25 cargo test --release -p stam-core --lib rigorous::tests::print_table_accuracy -- --ignored --nocapture"]
 fn print_table_accuracy() {
-    let grid: Vec<usize> = std::env::var("STAM_TABLE")
+    // Several grids: "12,25,3,25;16,25,4,20".
+    for grid in std::env::var("STAM_TABLE")
         .unwrap_or("12,25,3,25".into())
-        .split(',')
-        .map(|x| x.trim().parse().unwrap())
-        .collect();
+        .split(';')
+    {
+        let grid: Vec<usize> = grid.split(',').map(|x| x.trim().parse().unwrap()).collect();
+        print_one_table_accuracy(&grid);
+    }
+}
+
+fn print_one_table_accuracy(grid: &[usize]) {
+    let cases: usize = std::env::var("STAM_TABLE_CASES")
+        .map(|c| c.parse().unwrap())
+        .unwrap_or(150);
     let spec = TableSpec {
         lambda_min_nm: 380.0,
         lambda_max_nm: 780.0,
@@ -430,43 +507,29 @@ fn print_table_accuracy() {
     };
     let g = compact_disc();
     let t = table::build(&g, &spec).unwrap();
-    let mut rng = 0x2545F4914F6CDD1Du64;
-    let mut uniform = || {
-        rng ^= rng << 13;
-        rng ^= rng >> 7;
-        rng ^= rng << 17;
-        (rng >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let (mut worst, mut sum2, mut count, mut worst_total) = (0.0f64, 0.0, 0usize, 0.0f64);
+    let mut incidences = random_incidences(cases, (380.0, 780.0), 80.0);
+    if std::env::var("STAM_ON_ROWS").is_ok() {
+        // Diagnosis: on the rows (the error along ky alone).
+        for (l, kx, ky) in incidences.iter_mut() {
+            let il = ((*l - 380.0) / 400.0 * (spec.n_lambda - 1) as f64).round() as usize;
+            let ix = (0..t.n_kx_rows())
+                .min_by(|&a, &b| {
+                    (t.kx(a) - kx.abs())
+                        .abs()
+                        .total_cmp(&(t.kx(b) - kx.abs()).abs())
+                })
+                .unwrap();
+            *l = t.lambda_nm(il);
+            let q = (*kx * *kx + *ky * *ky).sqrt();
+            *kx = t.kx(ix).min(0.99);
+            *ky = ky.signum() * (q * q - *kx * *kx).max(0.0).sqrt();
+        }
+    }
+    let mut errors = table_errors(&g, &t, &incidences);
+    let (max, rms, p99) = error_summary(&errors);
     // Worst error by distance (in |k_t| / k0) to the nearest Rayleigh anomaly.
     let mut by_distance = [0.0f64; 4];
-    for _ in 0..150 {
-        let lambda = 380.0 + 400.0 * uniform();
-        let theta = (80.0 * uniform()).to_radians();
-        let phi = (180.0 * uniform()).to_radians();
-        let (kx, ky) = (theta.sin() * phi.cos(), theta.sin() * phi.sin());
-        let d = prepare(
-            &g.stack(lambda, 1.0),
-            lambda,
-            kx,
-            spec.orders,
-            Factorisation::Li,
-        )
-        .unwrap()
-        .solve(ky);
-        let mut total = 0.0;
-        let mut total_table = 0.0;
-        for o in &d.reflected {
-            let e = (t.efficiency(lambda, kx, ky, o.m) - o.unpolarised()).abs();
-            worst = worst.max(e);
-            sum2 += e * e;
-            count += 1;
-            total += o.unpolarised();
-        }
-        for m in t.m_min..=t.m_max {
-            total_table += t.efficiency(lambda, kx, ky, m);
-        }
-        worst_total = worst_total.max((total - total_table).abs());
+    for &(e, lambda, kx, ky, ..) in &errors {
         let step = lambda * 1e-3 / g.period_um;
         let distance = (-20..=20)
             .map(|n| (((kx + n as f64 * step).powi(2) + ky * ky).sqrt() - 1.0).abs())
@@ -475,18 +538,55 @@ fn print_table_accuracy() {
             .iter()
             .position(|&b| distance < b)
             .unwrap();
-        for o in &d.reflected {
-            let e = (t.efficiency(lambda, kx, ky, o.m) - o.unpolarised()).abs();
-            by_distance[bin] = by_distance[bin].max(e);
+        by_distance[bin] = by_distance[bin].max(e);
+    }
+    errors.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for e in errors.iter().take(8) {
+        println!(
+            "error {:.4} at lambda {:.1} kx {:.4} ky {:.4} m {}: table {:.4} solver {:.4}",
+            e.0, e.1, e.2, e.3, e.4, e.5, e.6
+        );
+        if std::env::var("STAM_READS").is_ok() {
+            for [l, kx, ky, w, v] in t.reads(e.1, e.2, e.3, e.4) {
+                let m = if e.2 < 0.0 { -e.4 } else { e.4 };
+                let d = prepare(&g.stack(l, 1.0), l, kx, spec.orders, Factorisation::Li)
+                    .unwrap()
+                    .solve(ky);
+                let truth = d.order(m).map_or(0.0, |o| o.unpolarised());
+                println!("    row {l:.1} {kx:.4} at ky {ky:.4} weight {w:.3}: read {v:.4} solver {truth:.4}");
+            }
         }
     }
     println!("worst per-order error by distance to an anomaly (<0.01, <0.03, <0.1, beyond): {by_distance:.4?}");
+    // Lookup cost.
+    let queries = random_incidences(100_000, (360.0, 830.0), 89.0);
+    let mut out = vec![0.0; (t.m_max - t.m_min + 1) as usize];
+    let clock = std::time::Instant::now();
+    let mut sum = 0.0;
+    for &(l, kx, ky) in &queries {
+        sum += t.efficiency(l, kx, ky, 1);
+    }
+    let one = clock.elapsed().as_secs_f64() / queries.len() as f64;
+    let clock = std::time::Instant::now();
+    for &(l, kx, ky) in &queries {
+        t.efficiencies(l, kx, ky, &mut out);
+        sum += out[3];
+    }
+    let all = clock.elapsed().as_secs_f64() / queries.len() as f64;
     println!(
-        "grid {grid:?}: build {:.1} s ({} threads), {} kB; per-order error max {worst:.4} rms {:.4}; total max {worst_total:.4}",
+        "grid {grid:?}: build {:.1} s ({} threads), {} rows, {} nodes, {} kB; per-order error max {max:.4} rms {rms:.4} p99 {p99:.4} over {} orders of {cases} incidences",
         t.build_seconds,
         std::thread::available_parallelism().map_or(1, |n| n.get()),
+        t.spec.n_lambda * t.n_kx_rows(),
+        t.node_count(),
         t.memory_bytes() / 1024,
-        (sum2 / count as f64).sqrt()
+        errors.len()
+    );
+    println!(
+        "lookup: efficiency() {:.0} ns, efficiencies() {:.0} ns for all {} orders ({sum:.1})",
+        one * 1e9,
+        all * 1e9,
+        out.len()
     );
 }
 
@@ -498,7 +598,7 @@ fn every_node_of_a_table_is_a_finite_efficiency() {
     let t = table::build(&g, &small_spec(8)).unwrap();
     let mut bad = 0;
     for il in 0..3 {
-        for ix in 0..9 {
+        for ix in 0..t.n_kx_rows() {
             let nodes = t.ky_nodes(il, ix);
             for (iy, y) in nodes.iter().enumerate() {
                 for m in t.m_min..=t.m_max {
@@ -518,3 +618,108 @@ fn every_node_of_a_table_is_a_finite_efficiency() {
     }
     assert_eq!(bad, 0);
 }
+
+#[test]
+#[ignore = "exploration: STAM_SWEEP=lambda,kx,n,orders prints a dense ky sweep"]
+fn print_ky_sweep() {
+    let a: Vec<f64> = std::env::var("STAM_SWEEP")
+        .unwrap_or("550,0.3,2000,25".into())
+        .split(',')
+        .map(|x| x.trim().parse().unwrap())
+        .collect();
+    let (lambda, kx, n, orders) = (a[0], a[1], a[2] as usize, a[3] as usize);
+    let g = compact_disc();
+    let p = prepare(&g.stack(lambda, 1.0), lambda, kx, orders, Factorisation::Li).unwrap();
+    let edge = (1.0 - kx * kx).sqrt();
+    for i in 0..n {
+        let ky = edge * (i as f64 + 0.5) / n as f64;
+        let d = p.solve(ky);
+        let e: Vec<String> = d
+            .reflected
+            .iter()
+            .map(|o| format!("{}:{:.6}:{:.6}", o.m, o.efficiency[0], o.efficiency[1]))
+            .collect();
+        println!("SWEEP {ky:.6} {}", e.join(" "));
+    }
+}
+
+#[test]
+fn a_small_table_interpolates_within_its_measured_error() {
+    // A coarse compact-disc table (3 wavelengths, 5 kx rows by symmetry,
+    // N = 12) against direct solves at random incidences up to 80 degrees,
+    // any azimuth (kx < 0 read by symmetry), within its wavelengths.
+    let g = compact_disc();
+    let spec = TableSpec {
+        nodes_per_gap: 3,
+        ..small_spec(12)
+    };
+    let t = table::build(&g, &spec).unwrap();
+    assert!(t.symmetric() && t.n_kx_rows() == 5);
+    let errors = table_errors(&g, &t, &random_incidences(40, (450.0, 650.0), 80.0));
+    let (max, rms, p99) = error_summary(&errors);
+    println!(
+        "{} nodes, {} orders: max {max:.4} rms {rms:.4} p99 {p99:.4}",
+        t.node_count(),
+        errors.len()
+    );
+    assert!(
+        max < SMALL_TABLE_MAX && rms < SMALL_TABLE_RMS,
+        "{max} {rms}"
+    );
+}
+
+#[test]
+fn lookups_are_efficiencies_everywhere() {
+    // Every order at any query, wavelengths beyond the table's included:
+    // finite, in [0, 1], the same through both calls, and zero for orders
+    // outside the table.
+    let g = compact_disc();
+    let t = table::build(&g, &small_spec(8)).unwrap();
+    let mut all = vec![0.0; (t.m_max - t.m_min + 1) as usize];
+    for (lambda, kx, ky) in random_incidences(300, (360.0, 830.0), 89.9) {
+        t.efficiencies(lambda, kx, ky, &mut all);
+        for m in t.m_min..=t.m_max {
+            let e = t.efficiency(lambda, kx, ky, m);
+            assert!(e.is_finite() && (0.0..=1.0).contains(&e), "{e}");
+            assert_eq!(e, all[(m - t.m_min) as usize]);
+        }
+        assert_eq!(t.efficiency(lambda, kx, ky, t.m_max + 1), 0.0);
+    }
+}
+
+#[test]
+fn mirror_symmetric_profiles_are_recognised() {
+    let tabulated = |h: &[f64]| Grating {
+        period_um: 1.0,
+        profile: Profile::Tabulated {
+            heights_um: h.to_vec(),
+        },
+        metal: aluminium(),
+        slices: 4,
+    };
+    assert!(table::is_symmetric(&compact_disc()));
+    assert!(table::is_symmetric(&tabulated(&[0.0, 0.1, 0.2, 0.1])));
+    assert!(table::is_symmetric(&tabulated(&[0.0, 0.1, 0.1, 0.0])));
+    assert!(!table::is_symmetric(&tabulated(&[
+        0.0, 0.05, 0.16, 0.2, 0.12, 0.03
+    ])));
+    // A symmetric staircase is symmetric in the solver too: order m at kx
+    // is order -m at -kx.
+    let g = tabulated(&[0.0, 0.1, 0.2, 0.1]);
+    let stack = g.stack(550.0, 1.0);
+    let at = |kx: f64| {
+        prepare(&stack, 550.0, kx, 15, Factorisation::Li)
+            .unwrap()
+            .solve(0.3)
+    };
+    let (plus, minus) = (at(0.4), at(-0.4));
+    for o in &plus.reflected {
+        let mirrored = minus.order(-o.m).expect("the mirrored order propagates");
+        assert!((o.unpolarised() - mirrored.unpolarised()).abs() < 1e-9);
+    }
+}
+
+/// Measured by `a_small_table_interpolates_within_its_measured_error`
+/// (max 0.170, rms 0.025, p99 0.114 over 313 orders), with a margin.
+const SMALL_TABLE_MAX: f64 = 0.22;
+const SMALL_TABLE_RMS: f64 = 0.032;
