@@ -168,26 +168,32 @@ impl PeriodicSurface {
             }
         }
         if n_broad > 0 || broad_overflow {
-            let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
             let orders = (!broad_overflow).then_some(&broad[..n_broad]);
-            let sums = match weights {
-                OrderWeights::Kirchhoff { .. } => self.broad_sums(&rule.nu_per_um, u, v, w, orders),
-                OrderWeights::Given(power) => std::array::from_fn(|j| {
-                    let nu = rule.nu_per_um[j];
-                    let power = |n| power(n, rule.lambda_nm[j]);
-                    self.node_sum(2.0 * PI * nu, u, v, orders, power)
-                }),
-            };
-            for (j, (&nu, sum)) in rule.nu_per_um.iter().zip(sums).enumerate() {
-                let r = match weights {
-                    OrderWeights::Kirchhoff {
-                        node_reflectance, ..
-                    } => node_reflectance(j),
-                    OrderWeights::Given(_) => 1.0,
-                };
-                let val = r * nu * nu * c_const * sum;
-                for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
-                    *o += wt * val;
+            match weights {
+                OrderWeights::Kirchhoff {
+                    node_reflectance, ..
+                } => {
+                    let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
+                    let sums = self.broad_sums(&rule.nu_per_um, u, v, w, orders);
+                    for (j, (&nu, sum)) in rule.nu_per_um.iter().zip(sums).enumerate() {
+                        let val = node_reflectance(j) * nu * nu * c_const * sum;
+                        for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
+                            *o += wt * val;
+                        }
+                    }
+                }
+                // Rigorous efficiencies have kinks in wavelength (an order
+                // appearing at the horizon): the finest rule.
+                OrderWeights::Given(power) => {
+                    let rule = spectrum::smooth_rule(spectrum::SMOOTH_RULE_MAX_NODES);
+                    for (j, &nu) in rule.nu_per_um.iter().enumerate() {
+                        let power = |n| power(n, rule.lambda_nm[j]);
+                        let sum = self.node_sum(2.0 * PI * nu, u, v, orders, power);
+                        let val = nu * nu * c_const * sum;
+                        for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
+                            *o += wt * val;
+                        }
+                    }
                 }
             }
         }

@@ -110,7 +110,7 @@ fn each_order_reflects_the_solvers_efficiency() {
     println!("{count} orders: worst |material - solver| {worst:.4}, worst total {worst_total:.4}");
     assert!(count > 40);
     assert!(worst < 0.04, "worst order error {worst}");
-    assert!(worst_total < 0.03, "worst total error {worst_total}");
+    assert!(worst_total < 0.05, "worst total error {worst_total}");
 }
 
 /// f(wi, wo) = f(wo, wi): exact by construction (both sides' tables).
