@@ -431,3 +431,55 @@ fn covered_disc_reflects_its_cover_and_the_orders_that_leave() {
         assert!(fit.p_value > 1e-3, "chi2 p {}", fit.p_value);
     }
 }
+
+/// Measurement: the cost of a rigorous disc's evaluations and strategies
+/// against the Kirchhoff disc's (the default, conserving).
+#[test]
+#[ignore = "measurement: cargo test --release -p stam-core --lib print_rigorous_costs -- --ignored --nocapture"]
+fn print_rigorous_costs() {
+    let kirchhoff = Brdf::from_json(r#"{"surface":"cd","fresnel":"aluminium"}"#).unwrap();
+    let rigorous = disc();
+    let mut rng = crate::benchmark::SplitMix64(3);
+    let pairs: Vec<(DVec3, DVec3, f64)> = (0..20_000)
+        .map(|_| {
+            let wi = direction(70.0 * rng.next_f64(), 360.0 * rng.next_f64());
+            let lambda = 400.0 + 300.0 * rng.next_f64();
+            let m = (rng.next_f64() * 7.0) as i64 - 3;
+            let x = (-wi.x + m as f64 * lambda * 1e-3 / CD_PERIOD_UM).clamp(-0.9, 0.9);
+            let y = -wi.y * 0.9;
+            (wi, DVec3::new(x, y, (1.0 - x * x - y * y).sqrt()), lambda)
+        })
+        .collect();
+    for (name, b) in [("kirchhoff", &kirchhoff), ("rigorous", rigorous)] {
+        let _ = b.eval_rgb(pairs[0].0, pairs[0].1);
+        let _ = b.sampler(pairs[0].0, None).pdf(pairs[0].1);
+        let t = std::time::Instant::now();
+        let mut sink = 0.0;
+        for &(wi, wo, lambda) in &pairs {
+            sink += b.eval_spectral(wi, wo, lambda);
+        }
+        let spectral = t.elapsed().as_secs_f64() / pairs.len() as f64;
+        let t = std::time::Instant::now();
+        for &(wi, wo, _) in &pairs {
+            sink += b.eval_rgb(wi, wo)[1];
+        }
+        let rgb = t.elapsed().as_secs_f64() / pairs.len() as f64;
+        let t = std::time::Instant::now();
+        for &(wi, wo, lambda) in &pairs {
+            sink += b.sampler(wi, Some(lambda)).pdf(wo);
+        }
+        let strategy = t.elapsed().as_secs_f64() / pairs.len() as f64;
+        let t = std::time::Instant::now();
+        for &(wi, wo, _) in &pairs {
+            sink += b.sampler(wi, None).pdf(wo);
+        }
+        let strategy_rgb = t.elapsed().as_secs_f64() / pairs.len() as f64;
+        println!(
+            "{name}: eval spectral {:.2} us, eval RGB {:.2} us, spectral strategy + pdf {:.2} us, RGB strategy + pdf {:.2} us ({sink:.1})",
+            spectral * 1e6,
+            rgb * 1e6,
+            strategy * 1e6,
+            strategy_rgb * 1e6
+        );
+    }
+}

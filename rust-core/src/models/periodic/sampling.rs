@@ -534,13 +534,25 @@ fn grating_component(
     }
     let (n_lo, n_hi) = (n_lo as i64, n_hi as i64);
     // Rigorous efficiencies change faster over the incidence than a cell
-    // (anomalies): read at wi itself (about a microsecond for all orders).
+    // (anomalies): read at wi itself, every order at once (about a
+    // microsecond).
     let cell = model
         .rigorous
         .is_none()
         .then(|| table.cell(fresnel, model, wi));
+    let rigorous = model.rigorous.as_ref().map(|r| {
+        let t = r.table();
+        let mut all = vec![0.0; (t.m_max - t.m_min + 1) as usize];
+        t.efficiencies(lambda_nm, -wi.x, -wi.y, &mut all);
+        (t.m_min, all)
+    });
     let mut prob: Vec<f64> = (n_lo..=n_hi)
         .map(|n| {
+            if let Some((m_min, all)) = &rigorous {
+                // Stam's order n is the solver's -n.
+                let w = all.get((-n - m_min) as usize).copied().unwrap_or(0.0);
+                return if w.is_finite() && w > 0.0 { w } else { 0.0 };
+            }
             let w = cell.map_or(0.0, |cell| table.weight(cell, n, lambda_nm));
             if w > 0.0 {
                 w
