@@ -600,6 +600,15 @@ pub fn table_key(grating: &Grating, spec: &TableSpec) -> String {
 /// Build a table (all cores), printing progress to stderr when it takes
 /// more than a second.
 pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, StamError> {
+    build_with(grating, spec, is_symmetric(grating))
+}
+
+/// `build`, with the rows for kx < 0 left out (`symmetric`) or not.
+pub(super) fn build_with(
+    grating: &Grating,
+    spec: &TableSpec,
+    symmetric: bool,
+) -> Result<EfficiencyTable, StamError> {
     if spec.n_lambda < 1 || spec.n_kx < 2 || spec.nodes_per_gap < 1 {
         return Err(StamError::new(
             "rigorous table: at least 1 wavelength, 2 kx rows and 1 node per gap",
@@ -625,7 +634,7 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
         m_min: -m_reach,
         m_max: m_reach,
         period_um: grating.period_um,
-        symmetric: is_symmetric(grating),
+        symmetric,
         rows: Vec::new(),
         build_seconds: 0.0,
     };
