@@ -454,7 +454,31 @@ impl Prepared {
             below = above;
         }
         let superstrate = homogeneous(&self.kx, ky, c64::new(n1 * n1, 0.0));
-        let (sum_lu, diff) = match_interface(&superstrate, &below, reflection.as_ref(), dim);
+        // The top interface needs A - B on the two incident columns alone:
+        // with U = V_top^-1 V, A + B = (W + U) + (W - U) R and
+        // A - B = (W - U) + (W + U) R, one product of full matrices.
+        enum Top<'a> {
+            Diff(Mat<c64>),
+            Split {
+                plus: Mat<c64>,
+                minus: Mat<c64>,
+                r: &'a Mat<c64>,
+            },
+        }
+        let (sum_lu, top) = match reflection.as_ref() {
+            Some(r) => {
+                let w = below.w.dense(dim);
+                let u = superstrate.v_inv.apply(below.v.dense(dim));
+                let plus = &w + &u;
+                let minus = &w - &u;
+                let sum = &plus + &minus * r;
+                (sum.partial_piv_lu(), Top::Split { plus, minus, r })
+            }
+            None => {
+                let (sum_lu, diff) = match_interface(&superstrate, &below, None, dim);
+                (sum_lu, Top::Diff(diff))
+            }
+        };
         interfaces.push(Interface {
             sum: sum_lu,
             phase_below,
@@ -469,9 +493,15 @@ impl Prepared {
             incident[(self.n_orders, col)] = c64::new(e[0], 0.0);
             incident[(m + self.n_orders, col)] = c64::new(e[1], 0.0);
         }
-        let top = interfaces.last().expect("the superstrate interface");
-        let y = top.sum.solve(&incident);
-        let reflected_e = &diff * &y;
+        let y = interfaces
+            .last()
+            .expect("the superstrate interface")
+            .sum
+            .solve(&incident);
+        let reflected_e = match &top {
+            Top::Diff(diff) => diff * &y,
+            Top::Split { plus, minus, r } => minus * &y + plus * (*r * &y),
+        };
         let reflected = self.outgoing(ky, &superstrate.gamma, &reflected_e, n1, -1.0, kz_inc);
 
         // Downward pass for the transmitted field, where it can carry power.

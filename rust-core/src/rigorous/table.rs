@@ -5,18 +5,20 @@
 //! an on-disk cache (keyed by the grating, the grid and `SOLVER_VERSION`).
 //!
 //! Efficiencies do not change under ky -> -ky (the grating is invariant
-//! along y), so the table covers ky >= 0. Rows are (wavelength, kx) on a
-//! uniform grid; one eigen-decomposition per row serves every ky
-//! (`solver::Prepared`). Efficiencies have kinks (and, in p, resonances) at
-//! the Rayleigh anomalies, where an order m grazes:
-//! ky_m = sqrt(n1^2 - (kx + m lambda / Lam)^2). A row's ky nodes are placed
-//! on these anomalies (its breakpoints, from 0 up to ky_0, the edge of the
-//! incidence disc) and `nodes_per_gap` - 1 more between each two, spaced
-//! as 1 - cos, dense next to the anomalies where efficiencies go as a square
-//! root. A lookup interpolates along each neighbouring row at the same
-//! place relative to the query's own anomalies (the fraction of the way
-//! between the same two orders' breakpoints), so a kink stays a kink
-//! instead of being smeared over a grid cell.
+//! along y), so the table covers ky >= 0; a grating that is its own mirror
+//! image (rect, sine, a symmetric tabulated profile) also has
+//! eta_m(kx) = eta_-m(-kx), and its table covers kx >= 0 alone. Rows are
+//! (wavelength, kx); one eigen-decomposition per row serves every ky
+//! (`solver::Prepared`). Efficiencies have kinks at the Rayleigh anomalies,
+//! where an order m grazes, ky_m^2 = n1^2 - (kx + m lambda / Lam)^2, and
+//! just beyond each, where that order has become evanescent, a resonance (a
+//! surface wave, in s and p alike in conical mounting). A row's ky nodes
+//! follow both (`Row::layout`): every anomaly is a node, and the band beyond
+//! it is sampled densely in sqrt(ky^2 - ky_m^2), the variable in which the
+//! kink is a straight line. Along a row values are cubic in that variable
+//! within a segment. Between rows, a lookup reads each neighbouring row at
+//! a ky shifted so that the query's nearby anomalies land on the same
+//! orders' anomalies in that row (`EfficiencyTable::locate`).
 
 use std::collections::HashMap;
 use std::io::{Read, Write};
@@ -41,12 +43,16 @@ pub struct TableSpec {
     pub lambda_min_nm: f64,
     pub lambda_max_nm: f64,
     pub n_lambda: usize,
-    /// Rows over kx in [-n1, n1], uniform. A grating symmetric under
+    /// Rows over kx in [-n1, n1], uniform in v with kx = n1 sin(1.2 v) /
+    /// sin(1.2) (denser towards the disc's edge). A grating symmetric under
     /// x -> -x (rect, sine, a symmetric tabulated profile) is built on the
     /// rows with kx >= 0 alone, n_kx / 2 + 1 of them over [0, n1], and read
     /// at -kx through eta_m(kx) = eta_-m(-kx).
     pub n_kx: usize,
-    /// ky nodes from one anomaly to the next in a row (>= 1).
+    /// Density of the ky nodes (>= 1): nodes per 0.25 of sqrt(ky^2 -
+    /// ky_m^2) in the band above each anomaly, 2.5 times fewer beyond it
+    /// (see `Row::layout`). 4 gives about 28 nodes per row on the compact
+    /// disc.
     pub nodes_per_gap: usize,
     /// Fourier orders -N..N of the solver.
     pub orders: usize,
@@ -221,6 +227,9 @@ struct Lookup {
     reads: [(u32, [f32; 4]); 4],
     weights: [f64; 4],
     rows: [u32; 4],
+    /// The query's (kx, lambda / Lam, ky^2) and each row's, as read.
+    query: [f64; 3],
+    places: [[f64; 3]; 4],
 }
 
 fn node(min: f64, max: f64, n: usize, i: usize) -> f64 {
@@ -326,12 +335,15 @@ impl EfficiencyTable {
     }
 
     /// The rows around (lambda, kx, ky) and where to read each: bilinear
-    /// over (lambda, kx); each row is read at ky'^2 = ky^2 + a shift that
-    /// carries the query's neighbouring anomalies (orders a below and b
-    /// above) onto the same orders' anomalies in that row, and blends the
-    /// two shifts with a smoothstep in between: next to an anomaly the row
-    /// is read at the same distance k_t^2 - n1^2 of that order from grazing,
-    /// so the kink and the resonance beside it stay where they are.
+    /// over (lambda, kx); each row is read at ky'^2 = ky^2 + a shift, the
+    /// average of the shifts that carry each of the query's anomalies onto
+    /// the same order's anomaly in that row, weighted 1 / (distance in
+    /// ky^2)^2: next to an anomaly the row is read at the same distance
+    /// k_t^2 - n1^2 of that order from grazing, so the kink and the
+    /// resonance beside it stay where they are. Anomalies just outside the
+    /// disc count too (fading out by VIRTUAL). A row that does not hold the
+    /// shifted place (a row nearer the edge than the query's |k_t|, or one
+    /// without that anomaly) hands its weight to its neighbour.
     fn locate(&self, lambda_nm: f64, kx: f64, ky: f64) -> Lookup {
         let s = &self.spec;
         let n1 = s.cover_eta;
@@ -381,6 +393,8 @@ impl EfficiencyTable {
             y2: [0.0; 4],
             weights: [0.0; 4],
             rows: [0; 4],
+            query: [kx, step, y2],
+            places: [[0.0; 3]; 4],
         };
         let mut slot = 0;
         let mut fit = [1.0f64; 4];
@@ -400,6 +414,7 @@ impl EfficiencyTable {
                 let y2_there = y2 + shift / total;
                 let edge_there = n1 * n1 - row_kx * row_kx;
                 out.reads[slot] = self.rows[r].place(y2_there.clamp(0.0, edge_there));
+                out.places[slot] = [row_kx, row_step, y2_there.clamp(0.0, edge_there)];
                 #[cfg(test)]
                 {
                     out.y2[slot] = y2_there.clamp(0.0, edge_there);
@@ -464,7 +479,21 @@ impl EfficiencyTable {
     /// Order k = m - m_min at a located query.
     fn read(&self, at: &Lookup, k: usize) -> f64 {
         let orders = self.orders();
+        let n1 = self.spec.cover_eta;
+        let m = self.m_min + k as i64;
+        let propagates = |[kx, step, y2]: [f64; 3]| {
+            let k = kx + m as f64 * step;
+            k * k + y2 < n1 * n1
+        };
+        // An order that does not propagate carries nothing.
+        if !propagates(at.query) {
+            return 0.0;
+        }
+        // Rows read where the order does not propagate (its anomaly moved
+        // past the query's place there) do not count while others do.
         let mut sum = 0.0;
+        let mut total = 0.0;
+        let mut sum_all = 0.0;
         for slot in 0..4 {
             let weight = at.weights[slot];
             if weight == 0.0 {
@@ -479,8 +508,13 @@ impl EfficiencyTable {
                     v += wj * row.values[(i + j) * orders + k];
                 }
             }
-            sum += weight * v as f64;
+            sum_all += weight * v as f64;
+            if propagates(at.places[slot]) {
+                sum += weight * v as f64;
+                total += weight;
+            }
         }
+        let sum = if total > 0.0 { sum / total } else { sum_all };
         // Cubic weights can overshoot a sharp peak a little.
         sum.clamp(0.0, 1.0)
     }
@@ -566,6 +600,15 @@ pub fn table_key(grating: &Grating, spec: &TableSpec) -> String {
 /// Build a table (all cores), printing progress to stderr when it takes
 /// more than a second.
 pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, StamError> {
+    build_with(grating, spec, is_symmetric(grating))
+}
+
+/// `build`, with the rows for kx < 0 left out (`symmetric`) or not.
+pub(super) fn build_with(
+    grating: &Grating,
+    spec: &TableSpec,
+    symmetric: bool,
+) -> Result<EfficiencyTable, StamError> {
     if spec.n_lambda < 1 || spec.n_kx < 2 || spec.nodes_per_gap < 1 {
         return Err(StamError::new(
             "rigorous table: at least 1 wavelength, 2 kx rows and 1 node per gap",
@@ -591,7 +634,7 @@ pub fn build(grating: &Grating, spec: &TableSpec) -> Result<EfficiencyTable, Sta
         m_min: -m_reach,
         m_max: m_reach,
         period_um: grating.period_um,
-        symmetric: is_symmetric(grating),
+        symmetric,
         rows: Vec::new(),
         build_seconds: 0.0,
     };
@@ -686,10 +729,27 @@ fn solve_row(
         Factorisation::Li,
     )?;
     for (iy, &y) in row.ky.iter().enumerate() {
-        let d = prepared.solve(y);
+        // At the disc's edge (grazing incidence) a solve can lose all
+        // precision: step a little inside until it gives efficiencies.
+        let mut d = prepared.solve(y);
+        let mut nudge = 1e-9;
+        while nudge < 1e-3
+            && !d
+                .reflected
+                .iter()
+                .all(|o| o.unpolarised().is_finite() && o.unpolarised() <= 1.0 + 1e-3)
+        {
+            d = prepared.solve(y * (1.0 - nudge));
+            nudge *= 10.0;
+        }
         for o in &d.reflected {
             if o.m >= table.m_min && o.m <= table.m_max {
-                row.values[iy * orders + (o.m - table.m_min) as usize] = o.unpolarised() as f32;
+                let e = o.unpolarised();
+                row.values[iy * orders + (o.m - table.m_min) as usize] = if e.is_finite() {
+                    e.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                } as f32;
             }
         }
     }
