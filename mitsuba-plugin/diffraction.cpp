@@ -163,7 +163,7 @@ Diffraction BSDF (:monosp:`diffraction`)
  * - fourier_orders
    - |int|
    - ``orders`` ``rigorous``: Fourier orders N each side that the solver
-     retains, an integer in [5, 200]. (Default: 25, more for periods above
+     retains, an integer in [5, 200]. (Default: 20, more for periods above
      2.5 um / ``cover_eta``)
    - |exposed|
  * - cover_eta

@@ -180,7 +180,7 @@ impl crate::models::ModelParams for PeriodicParams {
                 "Fourier orders each side that the rigorous solver retains",
                 range::FOURIER_ORDERS,
             )
-            .note("orders \"rigorous\"; default 25, more for periods above 2.5 um / cover_eta"),
+            .note("orders \"rigorous\"; default 20, more for periods above 2.5 um / cover_eta"),
             KeyDoc::number(
                 "cover_eta",
                 "refractive index of a transparent cover over the grating (a real disc's polycarbonate: 1.58)",

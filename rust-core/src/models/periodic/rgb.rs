@@ -12,6 +12,9 @@ use crate::special::{fast_exp, fast_exp_vectorisable, sin_squared};
 use crate::spectrum;
 use std::f64::consts::PI;
 
+/// Nodes of the broad-peak rule for powers given per order (rigorous.rs).
+const GIVEN_BROAD_NODES: usize = 96;
+
 impl PeriodicSurface {
     /// Linear-sRGB kernel: integral over the visible band of
     /// reflectance(lambda_nm) K(lambda) W_c(lambda) d lambda. No fixed
@@ -183,9 +186,11 @@ impl PeriodicSurface {
                     }
                 }
                 // Rigorous efficiencies have kinks in wavelength (an order
-                // appearing at the horizon): the finest rule.
+                // appearing at the horizon): a finer rule (order 0 at the
+                // mirror of (45, 180) deg on the disc, against a 0.25 nm
+                // reference: 32 nodes 4.0e-2, 64 2.6e-2, 96 5.6e-3).
                 OrderWeights::Given(power) => {
-                    let rule = spectrum::smooth_rule(spectrum::SMOOTH_RULE_MAX_NODES);
+                    let rule = spectrum::smooth_rule(GIVEN_BROAD_NODES);
                     for (j, &nu) in rule.nu_per_um.iter().enumerate() {
                         let power = |n| power(n, rule.lambda_nm[j]);
                         let sum = self.node_sum(2.0 * PI * nu, u, v, orders, power);

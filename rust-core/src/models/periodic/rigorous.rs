@@ -79,14 +79,17 @@ fn medium(fresnel: &Fresnel) -> Result<Medium, String> {
     }
 }
 
-/// The table grid of a material: the band, rows over (lambda, kx), the
-/// cover (1: none) as the incidence medium.
+/// The table grid of a material: the band, 20 x 41 rows over (lambda, kx),
+/// about 3 ky nodes per 0.25 of sqrt(ky^2 - ky_m^2) between anomalies, the
+/// cover (1: none) as the incidence medium. On the compact disc (N = 20)
+/// 3.8-5.7 s to build on 2 cores, per-order error rms 0.009, p99 0.037
+/// (docs/rigorous.md, "Measured accuracy").
 pub fn table_spec(fourier_orders: usize, cover_eta: f64) -> TableSpec {
     TableSpec {
         lambda_min_nm: LAMBDA_MIN_NM,
         lambda_max_nm: LAMBDA_MAX_NM,
-        n_lambda: 14,
-        n_kx: 25,
+        n_lambda: 20,
+        n_kx: 41,
         nodes_per_gap: 3,
         orders: fourier_orders,
         cover_eta,

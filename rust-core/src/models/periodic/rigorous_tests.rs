@@ -72,7 +72,7 @@ fn each_order_reflects_the_solvers_efficiency() {
             theta_rad: wi.z.acos(),
             phi_rad: (-wi.y).atan2(-wi.x),
         };
-        let d = solve(&disc_grating().stack(lambda, 1.0), &inc, 25).unwrap();
+        let d = solve(&disc_grating().stack(lambda, 1.0), &inc, 40).unwrap();
         let k = 2.0 * std::f64::consts::PI / (lambda * 1e-3);
         let sd = 1.0 / (std::f64::consts::SQRT_2 * k * l);
         let (mut total, mut total_solver) = (0.0, 0.0);
@@ -109,8 +109,8 @@ fn each_order_reflects_the_solvers_efficiency() {
     }
     println!("{count} orders: worst |material - solver| {worst:.4}, worst total {worst_total:.4}");
     assert!(count > 40);
-    assert!(worst < 0.04, "worst order error {worst}");
-    assert!(worst_total < 0.05, "worst total error {worst_total}");
+    assert!(worst < 0.03, "worst order error {worst}");
+    assert!(worst_total < 0.03, "worst total error {worst_total}");
 }
 
 /// f(wi, wo) = f(wo, wi): exact by construction (both sides' tables).
@@ -175,7 +175,7 @@ fn sampled_albedo_is_the_solvers_reflectance() {
             theta_rad: wi.z.acos(),
             phi_rad: (-wi.y).atan2(-wi.x),
         };
-        let d = solve(&disc_grating().stack(lambda, 1.0), &inc, 25).unwrap();
+        let d = solve(&disc_grating().stack(lambda, 1.0), &inc, 40).unwrap();
         let r = 0.5 * (d.reflectance()[0] + d.reflectance()[1]);
         println!("{lambda} nm ({theta}, {phi}): sampled albedo {mean:.4} +- {se:.4}, solver {r:.4}, cv {:.3}", var.sqrt() / mean);
         assert!(mean <= 1.0 + 3.0 * se);
@@ -260,7 +260,7 @@ fn rigorous_parameters_are_checked_by_name() {
     let resolved = crate::material::params::resolved_json_text(DISC).unwrap();
     let v: serde_json::Value = serde_json::from_str(&resolved).unwrap();
     assert_eq!(v["orders"], "rigorous");
-    assert_eq!(v["fourier_orders"], 25);
+    assert_eq!(v["fourier_orders"], 20);
     assert_eq!(v["energy"], "stam");
     let again = crate::material::params::MaterialParams::from_json(&resolved).unwrap();
     assert_eq!(
@@ -480,6 +480,49 @@ fn print_rigorous_costs() {
             rgb * 1e6,
             strategy * 1e6,
             strategy_rgb * 1e6
+        );
+    }
+}
+
+/// Measurement: the spread of RGB sample weights f cos / pdf (green) of
+/// the rigorous and the Kirchhoff disc over random incidences.
+#[test]
+#[ignore = "measurement: cargo test --release -p stam-core --lib print_rgb_weight_spread -- --ignored --nocapture"]
+fn print_rgb_weight_spread() {
+    let kirchhoff = Brdf::from_json(r#"{"surface":"cd","fresnel":"aluminium"}"#).unwrap();
+    for (name, b) in [("kirchhoff", &kirchhoff), ("rigorous", disc())] {
+        let mut rng = crate::benchmark::SplitMix64(9);
+        let (mut worst, mut worst_at) = (0.0f64, DVec3::ZERO);
+        let mut cvs = Vec::new();
+        for _ in 0..200 {
+            let wi = direction(85.0 * rng.next_f64().sqrt(), 360.0 * rng.next_f64());
+            let s = b.sampler(wi, None);
+            let w: Vec<f64> = (0..2000)
+                .map(|_| {
+                    let x = s.sample(rng.three());
+                    if x.pdf > 0.0 && !x.coherent {
+                        b.eval_rgb(wi, x.wo)[1] * x.wo.z / x.pdf
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            let (mean, var) = mean_var(&w);
+            let max = w.iter().cloned().fold(0.0, f64::max);
+            if mean > 0.0 {
+                cvs.push(var.sqrt() / mean);
+                if max / mean > worst {
+                    worst = max / mean;
+                    worst_at = wi;
+                }
+            }
+        }
+        cvs.sort_by(f64::total_cmp);
+        println!(
+            "{name}: cv median {:.2}, 90% {:.2}, max {:.2}; largest weight / mean {worst:.0} at wi {worst_at:?}",
+            cvs[cvs.len() / 2],
+            cvs[cvs.len() * 9 / 10],
+            cvs.last().unwrap()
         );
     }
 }

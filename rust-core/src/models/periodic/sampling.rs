@@ -591,7 +591,14 @@ impl Periodic {
                 self.surface.order_power(n, beta)
             }),
             Some(r) => {
-                let w = r.table().efficiency(lambda_nm, -wi.x, -wi.y, -n);
+                // At wi, or where the order does not propagate from wi (a
+                // cell's centre near its horizon), from its centre direction
+                // wo back (reciprocity): an order that carries light
+                // somewhere in the cell keeps a weight.
+                let t = r.table();
+                let w = t
+                    .efficiency(lambda_nm, -wi.x, -wi.y, -n)
+                    .max(t.efficiency(lambda_nm, -wo.x, -wo.y, -n));
                 if w.is_finite() && w > 0.0 {
                     w
                 } else {
