@@ -147,7 +147,8 @@ Diffraction BSDF (:monosp:`diffraction`)
      directions can reflect several times what it receives. AD variants: a
      parameter's first gradient rebuilds the material once with the table's
      derivative along it, which gradients then follow (``docs/inverse.md``). (Default:
-     ``conserving``; ``stam`` with a ``sigma_um`` texture)
+     ``conserving``; ``stam`` with a ``sigma_um`` texture or ``orders``
+     ``rigorous``, which conserves energy by itself)
    - |exposed| (a string)
  * - orders
    - |string|
