@@ -342,7 +342,11 @@ def test_resolved_params_fill_the_defaults_and_build_the_same_material():
         assert b.resolved_params() == {
             'surface': 'cd', 'period_um': 2.5, 'coherence_um': 50.0, 'profile': 'rect',
             'height_um': 0.15, 'width_um': 0.5, 'fresnel': 'aluminium', 'energy': 'conserving',
-            'gradients': False}
+            'gradients': False, 'orders': 'kirchhoff'}
+    with stam_core.Brdf({'surface': 'cd', 'orders': 'rigorous'}) as b:
+        r = b.resolved_params()
+        assert (r['orders'], r['fourier_orders'], r['cover_eta'], r['energy']) == \
+            ('rigorous', 20, 1.0, 'stam'), r
     with stam_core.Brdf(dict(GAUSSIAN, fresnel={'eta': 1.5})) as b:
         r = b.resolved_params()
         assert r['fresnel'] == {'eta': 1.5, 'k': 0.0} and r['rgb_nodes'] == 12, r
