@@ -144,6 +144,15 @@ impl Periodic {
         self.rigorous.as_ref()
     }
 
+    /// What a rigorous grating's cover reflects as a mirror at an incidence
+    /// cosine: the coherent lobe's value and its sampling probability (0
+    /// without a cover or for Stam's orders).
+    pub(super) fn cover_reflectance(&self, cos_i: f64) -> f64 {
+        self.rigorous
+            .as_ref()
+            .map_or(0.0, |r| r.cover_reflectance(cos_i))
+    }
+
     pub fn surface(&self) -> &PeriodicSurface {
         &self.surface
     }
@@ -223,7 +232,7 @@ impl SurfaceModel for Periodic {
         let eta = |n: i64| r.power(n, lambda_nm, geom.wi, geom.wo);
         Some(
             self.surface
-                .kernel_given(2.0 * PI / (lambda_nm * 1e-3), geom, &eta),
+                .kernel_given(spectrum::wavenumber_per_um(lambda_nm), geom, &eta),
         )
     }
 
@@ -257,16 +266,12 @@ impl SurfaceModel for Periodic {
 
     /// A rigorous grating's cover reflects like a mirror (0 without one).
     fn coherent_spectral(&self, _shading: &Shading, cos_i: f64, _lambda_nm: f64) -> f64 {
-        self.rigorous
-            .as_ref()
-            .map_or(0.0, |r| r.cover_reflectance(cos_i))
+        self.cover_reflectance(cos_i)
     }
 
     /// The cover's reflectance is flat in wavelength: the same in R, G, B.
     fn coherent_rgb(&self, _shading: &Shading, cos_i: f64) -> [f64; 3] {
-        [self.rigorous
-            .as_ref()
-            .map_or(0.0, |r| r.cover_reflectance(cos_i)); 3]
+        [self.cover_reflectance(cos_i); 3]
     }
 
     fn spectral_component(

@@ -422,7 +422,7 @@ impl GratingTable {
             })
             .collect();
         let row_cdf = (0..orders).map(|row| cdf[row * stride + bins]).collect();
-        let p_coh = model.coherent_probability(cos_i);
+        let p_coh = model.cover_reflectance(cos_i);
         Component::new(
             p_coh,
             1.0 - p_coh,
@@ -567,7 +567,7 @@ fn grating_component(
         return Component::cosine_only();
     }
     prob.iter_mut().for_each(|p| *p /= total);
-    let p_coh = model.coherent_probability(wi.z);
+    let p_coh = model.cover_reflectance(wi.z);
     Component::new(
         p_coh,
         1.0 - p_coh,
@@ -615,15 +615,6 @@ impl Periodic {
             None => fresnel.reflectance(cos_i, lambda_nm),
             Some(_) => 1.0,
         }
-    }
-
-    /// The probability of the coherent lobe at an incidence cosine: a
-    /// rigorous grating's cover reflectance (what it reflects as a
-    /// mirror), else 0.
-    fn coherent_probability(&self, cos_i: f64) -> f64 {
-        self.rigorous
-            .as_ref()
-            .map_or(0.0, |r| r.cover_reflectance(cos_i))
     }
 }
 
