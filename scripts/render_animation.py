@@ -54,6 +54,7 @@ import math
 import os
 import sys
 import time
+import uuid
 
 import numpy as np
 
@@ -233,9 +234,12 @@ def render(name, frames, res, spp, out_dir, client=None, root=ROOT, retries=3,
             # checkout at `root`, not this script on their import path.
             if render_frame.__module__ != '__main__':
                 cloudpickle.register_pickle_by_value(sys.modules[render_frame.__module__])
+            # A key of its own for each call: a key the scheduler still holds
+            # from an earlier call (its release is asynchronous) would return
+            # that call's result without rendering the frame again.
+            run = uuid.uuid4().hex[:8]
             futures = [client.submit(render_frame, name, k, frames, res, spp, out_dir,
-                                     exposure, root, key='%s-%s-frame-%04d' % (
-                                         name, os.path.basename(out_dir.rstrip('/')), k),
+                                     exposure, root, key='%s-frame-%04d-%s' % (name, k, run),
                                      pure=False, retries=retries)
                        for k in todo]
             for fut in as_completed(futures):
