@@ -25,7 +25,7 @@ import mitsuba as mi  # noqa: E402
 DISC = {'surface': 'cd', 'fresnel': 'aluminium', 'orders': 'rigorous'}
 
 
-def order_pairs(n=24, seed=3):
+def order_pairs(n=24, seed=3, period_um=2.5):
     """(wi, wo) with wo near a propagating order of wi at 550 nm."""
     rng = np.random.default_rng(seed)
     pairs = []
@@ -33,7 +33,7 @@ def order_pairs(n=24, seed=3):
         t, p = math.radians(70 * rng.random()), 2 * math.pi * rng.random()
         wi = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
         m = int(rng.integers(-3, 4))
-        x = -wi[0] + m * 0.55 / 2.5 + 2e-3 * (rng.random() - 0.5)
+        x = -wi[0] + m * 0.55 / period_um + 2e-3 * (rng.random() - 0.5)
         y = -wi[1]
         if x * x + y * y < 0.95:
             pairs.append((wi, np.array([x, y, math.sqrt(1 - x * x - y * y)])))
@@ -75,6 +75,35 @@ def test_scalar_variants_evaluate_the_cores_rigorous_grating(variant):
         bs, weight = bsdf.sample(ctx, si, sampler.random(), mi.Point2f(*sampler.random(2)))
         w = np.array(weight, dtype=np.float64)
         assert np.all(np.isfinite(w)) and np.all(w >= 0), w
+
+
+def test_a_table_built_while_mitsuba_loads_a_scene_is_right(tmp_path, monkeypatch):
+    """Mitsuba loads a scene's objects on threads that flush subnormals to
+    zero, and the table's build threads inherit that mode. The solver keeps
+    IEEE arithmetic for itself (rust-core/src/float_env.rs); before, a disc
+    in a scene rendered black (every solve non-finite). A grating of its
+    own (no cached table), built inside a scene, against the core's build
+    of it on this thread."""
+    stam_mitsuba.setup('scalar_rgb')
+    grating = dict(DISC, period_um=1.3)
+    monkeypatch.setenv('STAM_CACHE_DIR', str(tmp_path / 'scene'))
+    scene = mi.load_dict({'type': 'scene',
+                          'shape': {'type': 'sphere', 'bsdf': {'type': 'diffraction', **grating}}})
+    bsdf = scene.shapes()[0].bsdf()
+    monkeypatch.setenv('STAM_CACHE_DIR', str(tmp_path / 'here'))
+    ctx = mi.BSDFContext()
+    compared = 0
+    with stam_core.Brdf(grating) as core:
+        for wi, wo in order_pairs(period_um=1.3):
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*wi)
+            got = np.array(bsdf.eval(ctx, si, mi.Vector3f(*wo)), dtype=np.float64) / wo[2]
+            want = core.eval_rgb(wi[None], wo[None])[0]
+            scale = np.max(np.abs(want))
+            if scale > 0:
+                compared += 1
+                assert np.max(np.abs(got - want)) <= 2e-3 * scale + 1e-6, (wi, wo, got, want)
+    assert compared >= 12, compared
 
 
 def test_jit_variants_refuse_it_and_say_where_it_runs():

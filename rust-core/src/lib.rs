@@ -12,6 +12,7 @@
 pub mod benchmark;
 pub mod error;
 pub mod ffi;
+pub mod float_env;
 mod json;
 pub mod material;
 pub mod models;

@@ -29,6 +29,7 @@ use faer::prelude::*;
 use faer::{c64, Mat};
 
 use super::layers::{Layer, Stack};
+use crate::float_env::StandardFloats;
 use crate::StamError;
 
 /// Largest order count N (2N + 1 orders; matrices of 4N + 2).
@@ -417,6 +418,8 @@ impl Prepared {
     /// Solve for both incident polarisations at `ky` (the incident
     /// tangential wavevector is (kx, ky) over k0).
     pub fn solve(&self, ky: f64) -> Diffraction {
+        // A renderer's thread may flush subnormals, which the solve needs.
+        let _ieee = StandardFloats::enter();
         let m = self.kx.len();
         let dim = 2 * m;
         let n1 = self.superstrate_index;
@@ -590,6 +593,7 @@ pub fn prepare(
     n_orders: usize,
     rule: Factorisation,
 ) -> Result<Prepared, StamError> {
+    let _ieee = StandardFloats::enter();
     stack.validate()?;
     if !(lambda_nm > 0.0 && lambda_nm.is_finite()) {
         return Err(StamError::new(format!(

@@ -34,8 +34,9 @@ use crate::optics::profile::Profile;
 use crate::StamError;
 
 /// Bump when the solver's results or the table's layout change: it keys the
-/// on-disk cache.
-pub const SOLVER_VERSION: u32 = 2;
+/// on-disk cache. 3: tables built on threads that flush subnormals (a
+/// Mitsuba scene's loading) were wrong before float_env.rs.
+pub const SOLVER_VERSION: u32 = 3;
 
 /// The grid of a table and the solver's truncation.
 #[derive(Clone, Debug, PartialEq)]

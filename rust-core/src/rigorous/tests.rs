@@ -376,6 +376,32 @@ fn a_table_holds_the_solver_at_its_nodes_and_interpolates_between() {
     assert!((nodes[nodes.len() - 1] - (1.0 - t.kx(2).powi(2)).sqrt()).abs() < 1e-6);
 }
 
+/// Mitsuba loads scenes on threads that flush subnormals to zero; a table
+/// built there (its build threads inherit the mode) came out all zeros
+/// before the solver kept IEEE arithmetic for itself (float_env.rs).
+#[test]
+fn a_table_built_where_subnormals_are_flushed_is_the_same() {
+    let g = compact_disc();
+    let spec = small_spec(12);
+    let normal = table::build(&g, &spec).unwrap();
+    let flushed = crate::float_env::with_flushed_subnormals(|| table::build(&g, &spec).unwrap());
+    let mut worst = 0.0f64;
+    let mut largest = 0.0f64;
+    for il in 0..spec.n_lambda {
+        for ix in 0..normal.n_kx_rows() {
+            for iy in 0..normal.ky_nodes(il, ix).len() {
+                for m in normal.m_min..=normal.m_max {
+                    let a = normal.at_node(il, ix, iy, m);
+                    worst = worst.max((a - flushed.at_node(il, ix, iy, m)).abs());
+                    largest = largest.max(a);
+                }
+            }
+        }
+    }
+    println!("largest efficiency {largest:.3}, largest difference {worst:.1e}");
+    assert!(largest > 0.3 && worst < 1e-6);
+}
+
 #[test]
 fn tables_are_kept_in_memory_and_on_disk() {
     let dir = std::env::temp_dir().join(format!("stam-rigorous-cache-{}", std::process::id()));
