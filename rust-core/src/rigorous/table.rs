@@ -26,8 +26,6 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
-use smallvec::SmallVec;
-
 use super::layers::{Grating, Medium};
 use super::solver::{prepare, Factorisation};
 use crate::optics::profile::Profile;
@@ -76,6 +74,9 @@ struct Row {
     ky: Vec<f64>,
     /// [node][m - m_min].
     values: Vec<f32>,
+    /// The row's lambda / Lam and kx (as solved), which every lookup reads.
+    step: f64,
+    kx: f64,
 }
 
 /// Above an anomaly, the order that just stopped propagating carries a
@@ -124,6 +125,8 @@ impl Row {
             rising: Vec::new(),
             ky: vec![0.0],
             values: Vec::new(),
+            step,
+            kx,
         };
         for pair in anomalies.windows(2) {
             let (a, b) = (pair[0], pair[1]);
@@ -354,15 +357,17 @@ impl EfficiencyTable {
         let edge2 = n1 * n1 - kx * kx;
         let y2 = (ky * ky).min(edge2);
         let step = self.step(lambda);
-        // The query's anomalies: (order, ky^2 where it grazes, weight).
-        // Each row is read at ky^2 plus the shifts that carry these onto the
-        // same orders' anomalies in that row, averaged with weights
-        // 1 / (distance in ky^2)^2: at an anomaly, that anomaly's shift.
-        let mut anomalies: SmallVec<[(i64, f64, f64); 32]> = SmallVec::new();
+        // The query's anomalies: order m grazes at ky^2 = a_m = n1^2 -
+        // (kx + m step)^2. Each row is read at ky^2 plus the shifts that
+        // carry these onto the same orders' anomalies in that row, averaged
+        // with weights w_m = 1 / (distance in ky^2)^2: at an anomaly, that
+        // anomaly's shift. A shift, (kx + m step)^2 - (kx_r + m step_r)^2,
+        // is quadratic in m, so the average needs only the weights' first
+        // two moments in m (order 0 always counts: total > 0).
         let reach = (n1 * n1 + VIRTUAL).sqrt();
         let m_first = ((-reach - kx) / step).ceil() as i64;
         let m_last = ((reach - kx) / step).floor() as i64;
-        let mut total = 0.0;
+        let (mut total, mut moment1, mut moment2) = (0.0, 0.0, 0.0);
         for m in m_first..=m_last {
             let k = kx + m as f64 * step;
             if k.abs() < kx.abs() && m != 0 {
@@ -377,11 +382,12 @@ impl EfficiencyTable {
             };
             let d = y2 - a;
             let weight = fade / (d * d + 1e-24);
-            if weight > 0.0 {
-                anomalies.push((m, a, weight));
-                total += weight;
-            }
+            let m = m as f64;
+            total += weight;
+            moment1 += weight * m;
+            moment2 += weight * m * m;
         }
+        let (moment1, moment2) = (moment1 / total, moment2 / total);
         let nx = self.n_kx_rows();
         let (il, tl) = cell(lambda, s.lambda_min_nm, s.lambda_max_nm, s.n_lambda);
         let v_min = if self.symmetric { 0.0 } else { -1.0 };
@@ -403,16 +409,11 @@ impl EfficiencyTable {
             for (jx, wx) in [(ix, 1.0 - tx), (next(ix, nx), tx)] {
                 let weight = wl * wx;
                 let r = jl * nx + jx;
-                let (row_step, row_kx) = (self.step(self.lambda_nm(jl)), self.row_kx(jx));
-                let there = |m: i64| {
-                    let k = row_kx + m as f64 * row_step;
-                    n1 * n1 - k * k
-                };
-                let mut shift = 0.0;
-                for &(m, a, weight) in &anomalies {
-                    shift += weight * (there(m) - a);
-                }
-                let y2_there = y2 + shift / total;
+                let (row_step, row_kx) = (self.rows[r].step, self.rows[r].kx);
+                let shift = (kx * kx - row_kx * row_kx)
+                    + 2.0 * (kx * step - row_kx * row_step) * moment1
+                    + (step * step - row_step * row_step) * moment2;
+                let y2_there = y2 + shift;
                 let edge_there = n1 * n1 - row_kx * row_kx;
                 out.reads[slot] = self.rows[r].place(y2_there.clamp(0.0, edge_there));
                 out.places[slot] = [row_kx, row_step, y2_there.clamp(0.0, edge_there)];

@@ -238,11 +238,24 @@ impl SurfaceModel for Periodic {
 
     fn unfactored_rgb(&self, geom: &PairGeometry) -> Option<[f64; 3]> {
         let r = self.rigorous.as_ref()?;
-        let eta = |n: i64, lambda_nm: f64| r.power(n, lambda_nm, geom.wi, geom.wo);
-        Some(
-            self.surface
-                .kernel_rgb_general(geom, OrderWeights::Given(&eta)),
-        )
+        let power = |n: i64, lambda_nm: f64| r.power(n, lambda_nm, geom.wi, geom.wo);
+        let lambdas = PeriodicSurface::given_broad_wavelengths();
+        // Order 0's spectrum at the broad rule's nodes in one read.
+        let order_zero = std::cell::OnceCell::new();
+        let at_node = |n: i64, j: usize| {
+            if n == 0 {
+                order_zero.get_or_init(|| r.order_zero_at_nodes(geom.wi, geom.wo))[j]
+            } else {
+                power(n, lambdas[j])
+            }
+        };
+        Some(self.surface.kernel_rgb_general(
+            geom,
+            OrderWeights::Given {
+                power: &power,
+                at_node: &at_node,
+            },
+        ))
     }
 
     /// Orders appear and disappear at the horizon as the wavelength

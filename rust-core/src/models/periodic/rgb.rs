@@ -13,7 +13,7 @@ use crate::spectrum;
 use std::f64::consts::PI;
 
 /// Nodes of the broad-peak rule for powers given per order (rigorous.rs).
-const GIVEN_BROAD_NODES: usize = 96;
+pub(crate) const GIVEN_BROAD_NODES: usize = 96;
 
 impl PeriodicSurface {
     /// Linear-sRGB kernel: integral over the visible band of
@@ -39,6 +39,12 @@ impl PeriodicSurface {
     pub fn kernel_rgb(&self, geom: &PairGeometry, reflectance: &dyn Fn(f64) -> f64) -> [f64; 3] {
         let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
         self.kernel_rgb_with(geom, reflectance, &|j| reflectance(rule.lambda_nm[j]))
+    }
+
+    /// The wavelengths of the broad-peak rule for powers given per order
+    /// (`OrderWeights::Given`'s at_node).
+    pub(crate) fn given_broad_wavelengths() -> &'static [f64] {
+        &spectrum::smooth_rule(GIVEN_BROAD_NODES).lambda_nm
     }
 
     /// The wavelengths of the rule for broad peaks (see `kernel_rgb`).
@@ -89,7 +95,7 @@ impl PeriodicSurface {
         // k^2 l^2 / (pi w^2) = c_const nu^2 (Stam), k^2 l^2 / pi (given).
         let c_const = match weights {
             OrderWeights::Kirchhoff { .. } => 4.0 * PI * l * l / (w * w),
-            OrderWeights::Given(_) => 4.0 * PI * l * l,
+            OrderWeights::Given { .. } => 4.0 * PI * l * l,
         };
         let (n_lo, n_hi) = orders_in_band(u, lam, l, nu_lo, nu_hi);
         // Orders handled by the smooth rule (broad peaks).
@@ -152,7 +158,7 @@ impl PeriodicSurface {
                         let p = self.power_fast(n, beta, s2);
                         reflectance(1000.0 / nu) * nu * nu * p
                     }
-                    OrderWeights::Given(power) => power(n, 1000.0 / nu) * nu * nu,
+                    OrderWeights::Given { power, .. } => power(n, 1000.0 / nu) * nu * nu,
                 }
             };
             let sm = s_at(c - delta, s2[0]);
@@ -189,10 +195,10 @@ impl PeriodicSurface {
                 // appearing at the horizon): a finer rule (order 0 at the
                 // mirror of (45, 180) deg on the disc, against a 0.25 nm
                 // reference: 32 nodes 4.0e-2, 64 2.6e-2, 96 5.6e-3).
-                OrderWeights::Given(power) => {
+                OrderWeights::Given { at_node, .. } => {
                     let rule = spectrum::smooth_rule(GIVEN_BROAD_NODES);
                     for (j, &nu) in rule.nu_per_um.iter().enumerate() {
-                        let power = |n| power(n, rule.lambda_nm[j]);
+                        let power = |n| at_node(n, j);
                         let sum = self.node_sum(2.0 * PI * nu, u, v, orders, power);
                         let val = nu * nu * c_const * sum;
                         for (o, wt) in out.iter_mut().zip(rule.weights[j]) {
@@ -301,8 +307,13 @@ pub(crate) enum OrderWeights<'a> {
         reflectance: &'a dyn Fn(f64) -> f64,
         node_reflectance: &'a dyn Fn(usize) -> f64,
     },
-    /// power(n, lambda_nm): f's own weight of order n (rigorous.rs).
-    Given(&'a dyn Fn(i64, f64) -> f64),
+    /// f's own weight of order n (rigorous.rs): power(n, lambda_nm), and
+    /// at_node(n, j) = power(n, lambda_j) at the nodes of the broad rule
+    /// (`given_broad_wavelengths`), which a caller may tabulate.
+    Given {
+        power: &'a dyn Fn(i64, f64) -> f64,
+        at_node: &'a dyn Fn(i64, usize) -> f64,
+    },
 }
 
 /// Gaussian moments of the sRGB weight for one peak. Peaks narrower than a

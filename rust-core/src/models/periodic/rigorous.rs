@@ -41,11 +41,13 @@
 //! would re-diffract) and the polarisation through the two interfaces (each
 //! is taken unpolarised).
 
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
 
 use glam::DVec3;
 
-use super::Profile;
+use super::rgb::GIVEN_BROAD_NODES;
+use super::{PeriodicSurface, Profile};
 use crate::error::StamError;
 use crate::optics::fresnel::{conductor_reflectance, Fresnel};
 use crate::rigorous::{table, EfficiencyTable, Grating, Medium, TableSpec};
@@ -65,6 +67,31 @@ pub struct RigorousOrders {
     period_um: f64,
     /// Index of the transparent cover (1: none).
     cover_eta: f64,
+    /// Order 0 at the RGB broad rule's wavelengths, built on first use
+    /// and shared by the materials of the table (`mirror_cell`).
+    mirror: Arc<OnceLock<MirrorSpectra>>,
+}
+
+/// Nodes per axis of `MirrorSpectra`'s grid, over (|kx|, |ky|) in
+/// [0, MIRROR_REACH]^2; pairs with |(kx, ky)| beyond MIRROR_TRUST read the
+/// table at each wavelength (grazing incidence, where order 0 changes
+/// fastest).
+pub(crate) const MIRROR_GRID_X: usize = 256;
+pub(crate) const MIRROR_GRID_Y: usize = 64;
+const MIRROR_REACH: f64 = 0.92;
+const MIRROR_TRUST: f64 = 0.9;
+
+/// Order 0's efficiency at the wavelengths of the RGB broad-peak rule
+/// (`PeriodicSurface::given_broad_wavelengths`) over a grid of the pair's
+/// (|kx|, |ky|). Near the mirror direction, where the Gaussian of order 0
+/// is broad in wavelength, the RGB integral would read the table at each
+/// of these wavelengths for every pair; order 0's incidence does not
+/// depend on the wavelength (u_0 = 0), so one bilinear read of this grid
+/// gives the whole spectrum.
+#[derive(Debug)]
+struct MirrorSpectra {
+    /// [ix][iy][j]: |kx| = ix h, |ky| = iy h (h = MIRROR_REACH / (G - 1)).
+    values: Vec<f32>,
 }
 
 /// The medium of a material's Fresnel term: the solver needs the metal's
@@ -115,6 +142,7 @@ impl RigorousOrders {
         };
         let table = table::table(&grating, &table_spec(fourier_orders, cover_eta))?;
         Ok(RigorousOrders {
+            mirror: mirror_cell(&table),
             table,
             period_um,
             cover_eta,
@@ -147,7 +175,91 @@ impl RigorousOrders {
     }
 
     pub fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<RigorousOrders>() + self.table.memory_bytes()
+        std::mem::size_of::<RigorousOrders>()
+            + self.table.memory_bytes()
+            + self.mirror.get().map_or(0, |m| m.values.len() * 4)
+    }
+
+    /// Order 0's efficiency for a pair whose half difference of tangential
+    /// directions is (kx, ky) (`efficiency(0, ..)`: the table at (kx, ky)
+    /// from one side and at (-kx, ky) from the other).
+    fn order_zero(&self, lambda_nm: f64, kx: f64, ky: f64) -> f64 {
+        let read = |kx: f64| {
+            let (kx, ky) = within_disc(kx, ky);
+            self.table.efficiency(lambda_nm, kx, ky, 0)
+        };
+        if self.table.symmetric() {
+            read(kx)
+        } else {
+            0.5 * (read(kx) + read(-kx))
+        }
+    }
+
+    fn mirror_spectra(&self) -> &MirrorSpectra {
+        self.mirror.get_or_init(|| {
+            let lambdas = PeriodicSurface::given_broad_wavelengths();
+            let (gx, gy, nl) = (MIRROR_GRID_X, MIRROR_GRID_Y, lambdas.len());
+            let (hx, hy) = (
+                MIRROR_REACH / (gx - 1) as f64,
+                MIRROR_REACH / (gy - 1) as f64,
+            );
+            let mut values = vec![0.0f32; gx * gy * nl];
+            let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+            let per = gx.div_ceil(threads);
+            std::thread::scope(|scope| {
+                for (chunk, block) in values.chunks_mut(per * gy * nl).enumerate() {
+                    scope.spawn(move || {
+                        for (k, v) in block.iter_mut().enumerate() {
+                            let ix = chunk * per + k / (gy * nl);
+                            let (iy, j) = ((k / nl) % gy, k % nl);
+                            *v = self.order_zero(lambdas[j], ix as f64 * hx, iy as f64 * hy) as f32;
+                        }
+                    });
+                }
+            });
+            MirrorSpectra { values }
+        })
+    }
+
+    /// `power(0, lambda_j, wi, wo)` at every wavelength lambda_j of the RGB
+    /// broad rule: read bilinearly from the grid of order 0's spectra, or
+    /// from the table at grazing incidence.
+    pub fn order_zero_at_nodes(&self, wi: DVec3, wo: DVec3) -> [f64; GIVEN_BROAD_NODES] {
+        let mut out = [0.0; GIVEN_BROAD_NODES];
+        let (kx, ky) = (0.5 * (wo.x - wi.x), 0.5 * (wi.y - wo.y));
+        if kx.hypot(ky) > MIRROR_TRUST {
+            let lambdas = PeriodicSurface::given_broad_wavelengths();
+            for (o, &lambda) in out.iter_mut().zip(lambdas) {
+                *o = self.power(0, lambda, wi, wo);
+            }
+            return out;
+        }
+        let m = self.mirror_spectra();
+        let cell = |k: f64, g: usize| {
+            let t = (k.abs() / MIRROR_REACH * (g - 1) as f64).min((g - 1) as f64);
+            let i = (t as usize).min(g - 2);
+            (i, t - i as f64)
+        };
+        let ((ix, tx), (iy, ty)) = (cell(kx, MIRROR_GRID_X), cell(ky, MIRROR_GRID_Y));
+        let nl = GIVEN_BROAD_NODES;
+        let at = |ix: usize, iy: usize| &m.values[(ix * MIRROR_GRID_Y + iy) * nl..][..nl];
+        let (a, b, c, d) = (
+            at(ix, iy),
+            at(ix, iy + 1),
+            at(ix + 1, iy),
+            at(ix + 1, iy + 1),
+        );
+        let through = (1.0 - self.cover_reflectance(wi.z)) * (1.0 - self.cover_reflectance(wo.z));
+        let w = [
+            through * (1.0 - tx) * (1.0 - ty),
+            through * (1.0 - tx) * ty,
+            through * tx * (1.0 - ty),
+            through * tx * ty,
+        ];
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = w[0] * a[j] as f64 + w[1] * b[j] as f64 + w[2] * c[j] as f64 + w[3] * d[j] as f64;
+        }
+        out
     }
 
     /// The efficiency of Stam's order n for the pair (unit wi, wo above
@@ -163,8 +275,28 @@ impl RigorousOrders {
             let (kx, ky) = within_disc(-(x + half), ky);
             self.table.efficiency(lambda_nm, kx, ky, -n)
         };
+        // Order 0 reads (kx, ky) from one side and (-kx, ky) from the
+        // other: the same read on a symmetric grating's table.
+        if n == 0 && self.table.symmetric() {
+            return from(wi.x);
+        }
         0.5 * (from(wi.x) + from(wo.x))
     }
+}
+
+/// The grid of order 0's spectra of a table, one per table in the process
+/// (keyed by the table's address, which the entry keeps from reuse by
+/// holding the table).
+fn mirror_cell(table: &Arc<EfficiencyTable>) -> Arc<OnceLock<MirrorSpectra>> {
+    type Cell = (Arc<EfficiencyTable>, Arc<OnceLock<MirrorSpectra>>);
+    static CELLS: OnceLock<Mutex<HashMap<usize, Cell>>> = OnceLock::new();
+    let cells = CELLS.get_or_init(|| Mutex::new(HashMap::new()));
+    let key = Arc::as_ptr(table) as usize;
+    let mut cells = cells.lock().unwrap_or_else(|e| e.into_inner());
+    let (_, cell) = cells
+        .entry(key)
+        .or_insert_with(|| (table.clone(), Arc::new(OnceLock::new())));
+    cell.clone()
 }
 
 /// (kx, ky) moved radially inside the table's disc.

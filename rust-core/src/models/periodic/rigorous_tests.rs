@@ -450,8 +450,11 @@ fn print_rigorous_costs() {
             (wi, DVec3::new(x, y, (1.0 - x * x - y * y).sqrt()), lambda)
         })
         .collect();
+    let mirror = &pairs[..2000];
     for (name, b) in [("kirchhoff", &kirchhoff), ("rigorous", rigorous)] {
         let _ = b.eval_rgb(pairs[0].0, pairs[0].1);
+        // Order 0's grid of spectra (built on the first pair near the mirror).
+        let _ = b.eval_rgb(direction(30.0, 0.0), direction(30.0, 180.0));
         let _ = b.sampler(pairs[0].0, None).pdf(pairs[0].1);
         let t = std::time::Instant::now();
         let mut sink = 0.0;
@@ -464,6 +467,14 @@ fn print_rigorous_costs() {
             sink += b.eval_rgb(wi, wo)[1];
         }
         let rgb = t.elapsed().as_secs_f64() / pairs.len() as f64;
+        // Near the mirror direction (order 0's broad peak in wavelength).
+        let t = std::time::Instant::now();
+        for &(wi, _, _) in mirror {
+            let wo = DVec3::new(-wi.x + 0.01, -wi.y, 0.0);
+            let wo = DVec3::new(wo.x, wo.y, (1.0 - wo.x * wo.x - wo.y * wo.y).sqrt());
+            sink += b.eval_rgb(wi, wo)[1];
+        }
+        let rgb_mirror = t.elapsed().as_secs_f64() / mirror.len() as f64;
         let t = std::time::Instant::now();
         for &(wi, wo, lambda) in &pairs {
             sink += b.sampler(wi, Some(lambda)).pdf(wo);
@@ -475,9 +486,10 @@ fn print_rigorous_costs() {
         }
         let strategy_rgb = t.elapsed().as_secs_f64() / pairs.len() as f64;
         println!(
-            "{name}: eval spectral {:.2} us, eval RGB {:.2} us, spectral strategy + pdf {:.2} us, RGB strategy + pdf {:.2} us ({sink:.1})",
+            "{name}: eval spectral {:.2} us, eval RGB {:.2} us (0.01 from the mirror {:.2} us), spectral strategy + pdf {:.2} us, RGB strategy + pdf {:.2} us ({sink:.1})",
             spectral * 1e6,
             rgb * 1e6,
+            rgb_mirror * 1e6,
             strategy * 1e6,
             strategy_rgb * 1e6
         );
@@ -525,4 +537,93 @@ fn print_rgb_weight_spread() {
             cvs.last().unwrap()
         );
     }
+}
+
+/// Order 0's spectra read from their grid (`order_zero_at_nodes`, what the
+/// RGB broad rule takes near the mirror direction) against the table read
+/// at each wavelength, at pairs around the mirror direction: per node, and
+/// through the RGB kernel over coherence lengths that make the peak broad.
+#[test]
+fn order_zero_spectra_agree_with_the_table() {
+    use super::rigorous::RigorousOrders;
+    use super::{OrderWeights, PeriodicSurface};
+    use crate::optics::fresnel::{metal_by_name, Fresnel};
+    use crate::optics::geometry::PairGeometry;
+    let orders = RigorousOrders::new(
+        CD_PERIOD_UM,
+        &disc_grating().profile,
+        &Fresnel::metal(metal_by_name("aluminium").unwrap()),
+        crate::rigorous::default_fourier_orders(CD_PERIOD_UM, 1.0),
+        1.0,
+    )
+    .unwrap();
+    let lambdas = PeriodicSurface::given_broad_wavelengths();
+    let mut rng = crate::benchmark::SplitMix64(11);
+    let (mut worst, mut sum2, mut count) = (0.0f64, 0.0, 0usize);
+    let mut rgb_errors = Vec::new();
+    for _ in 0..400 {
+        let wi = direction(85.0 * rng.next_f64().sqrt(), 360.0 * rng.next_f64());
+        // Around the mirror direction, up to 0.05 in the projected plane.
+        let (dx, dy) = (0.1 * rng.next_f64() - 0.05, 0.1 * rng.next_f64() - 0.05);
+        let (x, y) = (-wi.x + dx, -wi.y + dy);
+        if x * x + y * y > 0.999 {
+            continue;
+        }
+        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        let read = orders.order_zero_at_nodes(wi, wo);
+        for (j, &lambda) in lambdas.iter().enumerate() {
+            let e = (read[j] - orders.power(0, lambda, wi, wo)).abs();
+            worst = worst.max(e);
+            sum2 += e * e;
+            count += 1;
+        }
+        let coherence_um = 1.0 + 30.0 * rng.next_f64();
+        let surface =
+            PeriodicSurface::new(CD_PERIOD_UM, coherence_um, disc_grating().profile).unwrap();
+        let geom = PairGeometry::new(wi, wo).unwrap();
+        let power = |n: i64, lambda: f64| orders.power(n, lambda, wi, wo);
+        let direct = |n: i64, j: usize| power(n, lambdas[j]);
+        let gridded = |n: i64, j: usize| if n == 0 { read[j] } else { direct(n, j) };
+        let kernel = |at_node: &dyn Fn(i64, usize) -> f64| {
+            surface.kernel_rgb_general(
+                &geom,
+                OrderWeights::Given {
+                    power: &power,
+                    at_node,
+                },
+            )
+        };
+        let (fast, slow) = (kernel(&gridded), kernel(&direct));
+        // Relative to the lobe's peak: f at the mirror direction.
+        let mirror = DVec3::new(-wi.x, -wi.y, wi.z);
+        let peak_geom = PairGeometry::new(wi, mirror).unwrap();
+        let peak_power = |n: i64, lambda: f64| orders.power(n, lambda, wi, mirror);
+        let peak_at = |n: i64, j: usize| peak_power(n, lambdas[j]);
+        let peak = surface.kernel_rgb_general(
+            &peak_geom,
+            OrderWeights::Given {
+                power: &peak_power,
+                at_node: &peak_at,
+            },
+        );
+        let scale = peak.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+        if scale > 0.0 {
+            let e = (0..3)
+                .map(|c| (fast[c] - slow[c]).abs())
+                .fold(0.0, f64::max)
+                / scale;
+            let a = coherence_um * geom.u.hypot(geom.v);
+            rgb_errors.push((e, a, 0.5 * (wo.x - wi.x).hypot(wo.y - wi.y)));
+        }
+    }
+    let rms = (sum2 / count as f64).sqrt();
+    rgb_errors.sort_by(|a, b| b.0.total_cmp(&a.0));
+    println!("order 0 per node: worst {worst:.4}, rms {rms:.5} ({count} reads)");
+    println!(
+        "RGB error over the lobe's peak (error, l rho, |k|), worst first: {:?}",
+        &rgb_errors[..8]
+    );
+    let p90 = rgb_errors[rgb_errors.len() / 10].0;
+    println!("RGB: {} pairs, p90 {p90:.2e}", rgb_errors.len());
+    assert!(rms < 4e-3 && rgb_errors[0].0 < 5e-3);
 }
