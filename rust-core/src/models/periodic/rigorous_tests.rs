@@ -561,10 +561,21 @@ fn order_zero_spectra_agree_with_the_table() {
     let mut rng = crate::benchmark::SplitMix64(11);
     let (mut worst, mut sum2, mut count) = (0.0f64, 0.0, 0usize);
     let mut rgb_errors = Vec::new();
-    for _ in 0..400 {
+    for i in 0..600 {
         let wi = direction(85.0 * rng.next_f64().sqrt(), 360.0 * rng.next_f64());
-        // Around the mirror direction, up to 0.05 in the projected plane.
-        let (dx, dy) = (0.1 * rng.next_f64() - 0.05, 0.1 * rng.next_f64() - 0.05);
+        // Around the mirror direction, up to 0.05 in the projected plane
+        // (a third of them at the mirror direction, half of those in the
+        // plane across the grooves).
+        let (dx, dy) = if i % 3 == 0 {
+            (0.0, 0.0)
+        } else {
+            (0.1 * rng.next_f64() - 0.05, 0.1 * rng.next_f64() - 0.05)
+        };
+        let wi = if i % 6 == 0 {
+            direction(85.0 * rng.next_f64().sqrt(), 180.0 * (i % 12 / 6) as f64)
+        } else {
+            wi
+        };
         let (x, y) = (-wi.x + dx, -wi.y + dy);
         if x * x + y * y > 0.999 {
             continue;
@@ -623,7 +634,116 @@ fn order_zero_spectra_agree_with_the_table() {
         "RGB error over the lobe's peak (error, l rho, |k|), worst first: {:?}",
         &rgb_errors[..8]
     );
+    for band in [0.0, 0.8, 0.9, 0.95, 0.98] {
+        let worst_in = rgb_errors
+            .iter()
+            .filter(|e| e.2 >= band)
+            .fold(0.0f64, |a, e| a.max(e.0));
+        let n = rgb_errors.iter().filter(|e| e.2 >= band).count();
+        println!("|k| >= {band}: {n} pairs, worst {worst_in:.2e}");
+    }
     let p90 = rgb_errors[rgb_errors.len() / 10].0;
     println!("RGB: {} pairs, p90 {p90:.2e}", rgb_errors.len());
-    assert!(rms < 4e-3 && rgb_errors[0].0 < 5e-3);
+    // Measured: rms 0.0027, RGB worst 2.0e-2 of the peak (at the mirror
+    // direction itself, |k| 0.61), p90 1.0e-3.
+    assert!(rms < 4e-3 && rgb_errors[0].0 < 3e-2 && p90 < 3e-3);
+}
+
+/// At the mirror direction (where order 0's broad peak is largest), RGB
+/// from order 0's grid of spectra and from the table read at each node,
+/// both against the solver itself at each node (N as the table's).
+#[test]
+fn order_zero_grid_and_table_against_the_solver_at_the_mirror() {
+    use super::rigorous::RigorousOrders;
+    use super::{OrderWeights, PeriodicSurface};
+    use crate::optics::fresnel::{metal_by_name, Fresnel};
+    use crate::optics::geometry::PairGeometry;
+    let n_fourier = crate::rigorous::default_fourier_orders(CD_PERIOD_UM, 1.0);
+    let orders = RigorousOrders::new(
+        CD_PERIOD_UM,
+        &disc_grating().profile,
+        &Fresnel::metal(metal_by_name("aluminium").unwrap()),
+        n_fourier,
+        1.0,
+    )
+    .unwrap();
+    let g = disc_grating();
+    let lambdas = PeriodicSurface::given_broad_wavelengths();
+    let surface = PeriodicSurface::new(CD_PERIOD_UM, 50.0, disc_grating().profile).unwrap();
+    let (mut worst_grid, mut worst_table, mut worst_added) = (0.0f64, 0.0f64, 0.0f64);
+    let mut rng = crate::benchmark::SplitMix64(5);
+    let mut incidences = vec![
+        (10.0, 180.0),
+        (37.3, 180.0),
+        (45.0, 180.0),
+        (52.0, 0.0),
+        (20.0, 60.0),
+        (35.0, 120.0),
+        (50.0, 30.0),
+        (60.0, 90.0),
+    ];
+    incidences.extend((0..8).map(|_| (60.0 * rng.next_f64(), 360.0 * rng.next_f64())));
+    for &(theta, phi) in &incidences {
+        let wi = direction(theta, phi);
+        let wo = DVec3::new(-wi.x, -wi.y, wi.z);
+        let geom = PairGeometry::new(wi, wo).unwrap();
+        // The table is read at incidence (kx, ky) = -wi's tangential part.
+        let inc = Incidence {
+            lambda_nm: 0.0,
+            theta_rad: f64::to_radians(theta),
+            phi_rad: f64::to_radians(phi + 180.0),
+        };
+        let solved: Vec<f64> = lambdas
+            .iter()
+            .map(|&lambda| {
+                let d = solve(
+                    &g.stack(lambda, 1.0),
+                    &Incidence {
+                        lambda_nm: lambda,
+                        ..inc
+                    },
+                    n_fourier,
+                )
+                .unwrap();
+                d.reflected
+                    .iter()
+                    .find(|o| o.m == 0)
+                    .map_or(0.0, |o| o.unpolarised())
+            })
+            .collect();
+        let grid = orders.order_zero_at_nodes(wi, wo);
+        let power = |n: i64, lambda: f64| orders.power(n, lambda, wi, wo);
+        let kernel = |at_node: &dyn Fn(i64, usize) -> f64| {
+            surface.kernel_rgb_general(
+                &geom,
+                OrderWeights::Given {
+                    power: &power,
+                    at_node,
+                },
+            )
+        };
+        let from_solver = kernel(&|n: i64, j: usize| if n == 0 { solved[j] } else { 0.0 });
+        let from_grid = kernel(&|n: i64, j: usize| if n == 0 { grid[j] } else { 0.0 });
+        let from_table =
+            kernel(&|n: i64, j: usize| if n == 0 { power(0, lambdas[j]) } else { 0.0 });
+        let scale = from_solver.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
+        let err = |v: [f64; 3]| {
+            (0..3)
+                .map(|c| (v[c] - from_solver[c]).abs())
+                .fold(0.0, f64::max)
+                / scale
+        };
+        println!(
+            "({theta}, {phi}): grid {:.2e}, table {:.2e} of the solver's",
+            err(from_grid),
+            err(from_table)
+        );
+        worst_grid = worst_grid.max(err(from_grid));
+        worst_table = worst_table.max(err(from_table));
+        worst_added = worst_added.max(err(from_grid) - err(from_table));
+    }
+    println!("worst: grid {worst_grid:.2e}, table {worst_table:.2e}; the grid adds at most {worst_added:.2e}");
+    // The table's own error is issue 41's open accuracy item; the grid
+    // must not add to it beyond 0.5% of the peak.
+    assert!(worst_added < 5e-3 && worst_table < 0.1);
 }
