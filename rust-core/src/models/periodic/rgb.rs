@@ -15,6 +15,17 @@ use std::f64::consts::PI;
 /// Nodes of the broad-peak rule for powers given per order (rigorous.rs).
 pub(crate) const GIVEN_BROAD_NODES: usize = 96;
 
+/// Narrow peaks of a power given per order wider than this (sd in
+/// wavenumber, 1 / um) take midpoints GIVEN_PEAK_SPACING apart over the
+/// peak's +-4 sd (GIVEN_PEAK_NODES at least and at most) instead of a
+/// quadratic fit through three wavelengths, which misses an efficiency's
+/// kinks (print_rgb_against_the_reference: 9.1% at a coherence length of
+/// 8 um, 1.0% at 50 um with the fit; 16 midpoints 0.77%, 0.44%; 8 midpoints
+/// 3.8% at 8 um).
+const GIVEN_FIT_SIGMA: f64 = 0.005;
+const GIVEN_PEAK_SPACING: f64 = 0.03;
+const GIVEN_PEAK_NODES: (f64, f64) = (8.0, 24.0);
+
 impl PeriodicSurface {
     /// Linear-sRGB kernel: integral over the visible band of
     /// reflectance(lambda_nm) K(lambda) W_c(lambda) d lambda. No fixed
@@ -145,6 +156,30 @@ impl PeriodicSurface {
                     broad_overflow = true;
                 }
                 continue;
+            }
+            // A given power (a rigorous efficiency) has kinks in wavelength
+            // where another order meets the horizon, which a quadratic fit
+            // of a peak wider than a few nm misses: a midpoint rule over
+            // the peak's significant part instead.
+            if let OrderWeights::Given { power, .. } = weights {
+                if s > GIVEN_FIT_SIGMA && b > a {
+                    let nodes = ((b - a) / GIVEN_PEAK_SPACING)
+                        .ceil()
+                        .clamp(GIVEN_PEAK_NODES.0, GIVEN_PEAK_NODES.1)
+                        as usize;
+                    let h = (b - a) / nodes as f64;
+                    let scale = c_const * fast_exp(-a_n) * h;
+                    for j in 0..nodes {
+                        let nu = a + (j as f64 + 0.5) * h;
+                        let g = fast_exp(-0.5 * ((nu - mu) / s).powi(2));
+                        let val = scale * g * power(n, 1000.0 / nu) * nu * nu;
+                        let weight = spectrum::srgb_weight_per_wavenumber(nu);
+                        for (o, w) in out.iter_mut().zip(weight) {
+                            *o += val * w;
+                        }
+                    }
+                    continue;
+                }
             }
             // Quadratic fit of S(nu) = R nu^2 |c_n(2 pi nu w)|^2 at c, c +- delta
             // (Gauss-Hermite nodes mu +- sqrt(3) s for a peak inside the band).
