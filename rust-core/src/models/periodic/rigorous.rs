@@ -90,7 +90,8 @@ const MIRROR_TRUST: f64 = 0.9;
 /// gives the whole spectrum.
 #[derive(Debug)]
 struct MirrorSpectra {
-    /// [ix][iy][j]: |kx| = ix h, |ky| = iy h (h = MIRROR_REACH / (G - 1)).
+    /// [ix][iy][j]: |kx| = ix hx, |ky| = iy hy (h = MIRROR_REACH / (G - 1)
+    /// on each axis's G).
     values: Vec<f32>,
 }
 
@@ -166,8 +167,12 @@ impl RigorousOrders {
     /// Order n's power in f for the pair: its efficiency through the
     /// cover's two interfaces (1 - R in, 1 - R out).
     pub fn power(&self, n: i64, lambda_nm: f64, wi: DVec3, wo: DVec3) -> f64 {
-        let through = (1.0 - self.cover_reflectance(wi.z)) * (1.0 - self.cover_reflectance(wo.z));
-        through * self.efficiency(n, lambda_nm, wi, wo)
+        self.through(wi, wo) * self.efficiency(n, lambda_nm, wi, wo)
+    }
+
+    /// What the cover lets through on the way in and out (1 without one).
+    fn through(&self, wi: DVec3, wo: DVec3) -> f64 {
+        (1.0 - self.cover_reflectance(wi.z)) * (1.0 - self.cover_reflectance(wo.z))
     }
 
     pub fn table(&self) -> &EfficiencyTable {
@@ -227,10 +232,11 @@ impl RigorousOrders {
     pub fn order_zero_at_nodes(&self, wi: DVec3, wo: DVec3) -> [f64; GIVEN_BROAD_NODES] {
         let mut out = [0.0; GIVEN_BROAD_NODES];
         let (kx, ky) = (0.5 * (wo.x - wi.x), 0.5 * (wi.y - wo.y));
+        let through = self.through(wi, wo);
         if kx.hypot(ky) > MIRROR_TRUST {
             let lambdas = PeriodicSurface::given_broad_wavelengths();
             for (o, &lambda) in out.iter_mut().zip(lambdas) {
-                *o = self.power(0, lambda, wi, wo);
+                *o = through * self.efficiency(0, lambda, wi, wo);
             }
             return out;
         }
@@ -249,7 +255,6 @@ impl RigorousOrders {
             at(ix + 1, iy),
             at(ix + 1, iy + 1),
         );
-        let through = (1.0 - self.cover_reflectance(wi.z)) * (1.0 - self.cover_reflectance(wo.z));
         let w = [
             through * (1.0 - tx) * (1.0 - ty),
             through * (1.0 - tx) * ty,

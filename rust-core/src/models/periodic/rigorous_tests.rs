@@ -585,24 +585,39 @@ fn print_rgb_weight_spread() {
     }
 }
 
-/// Order 0's spectra read from their grid (`order_zero_at_nodes`, what the
-/// RGB broad rule takes near the mirror direction) against the table read
-/// at each wavelength, at pairs around the mirror direction: per node, and
-/// through the RGB kernel over coherence lengths that make the peak broad.
-#[test]
-fn order_zero_spectra_agree_with_the_table() {
-    use super::rigorous::RigorousOrders;
-    use super::{OrderWeights, PeriodicSurface};
+/// The compact disc's rigorous orders as the material makes them (the
+/// table from the cache that `disc()` fills).
+fn disc_orders() -> super::rigorous::RigorousOrders {
     use crate::optics::fresnel::{metal_by_name, Fresnel};
-    use crate::optics::geometry::PairGeometry;
-    let orders = RigorousOrders::new(
+    super::rigorous::RigorousOrders::new(
         CD_PERIOD_UM,
         &disc_grating().profile,
         &Fresnel::metal(metal_by_name("aluminium").unwrap()),
         crate::rigorous::default_fourier_orders(CD_PERIOD_UM, 1.0),
         1.0,
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// The RGB kernel of `surface` with the powers given per order.
+fn given_rgb(
+    surface: &super::PeriodicSurface,
+    geom: &crate::optics::geometry::PairGeometry,
+    power: &dyn Fn(i64, f64) -> f64,
+    at_node: &dyn Fn(i64, usize) -> f64,
+) -> [f64; 3] {
+    surface.kernel_rgb_general(geom, super::OrderWeights::Given { power, at_node })
+}
+
+/// Order 0's spectra read from their grid (`order_zero_at_nodes`, what the
+/// RGB broad rule takes near the mirror direction) against the table read
+/// at each wavelength, at pairs around the mirror direction: per node, and
+/// through the RGB kernel over coherence lengths that make the peak broad.
+#[test]
+fn order_zero_spectra_agree_with_the_table() {
+    use super::PeriodicSurface;
+    use crate::optics::geometry::PairGeometry;
+    let orders = disc_orders();
     let lambdas = PeriodicSurface::given_broad_wavelengths();
     let mut rng = crate::benchmark::SplitMix64(11);
     let (mut worst, mut sum2, mut count) = (0.0f64, 0.0, 0usize);
@@ -641,28 +656,15 @@ fn order_zero_spectra_agree_with_the_table() {
         let power = |n: i64, lambda: f64| orders.power(n, lambda, wi, wo);
         let direct = |n: i64, j: usize| power(n, lambdas[j]);
         let gridded = |n: i64, j: usize| if n == 0 { read[j] } else { direct(n, j) };
-        let kernel = |at_node: &dyn Fn(i64, usize) -> f64| {
-            surface.kernel_rgb_general(
-                &geom,
-                OrderWeights::Given {
-                    power: &power,
-                    at_node,
-                },
-            )
-        };
+        let kernel =
+            |at_node: &dyn Fn(i64, usize) -> f64| given_rgb(&surface, &geom, &power, at_node);
         let (fast, slow) = (kernel(&gridded), kernel(&direct));
         // Relative to the lobe's peak: f at the mirror direction.
         let mirror = DVec3::new(-wi.x, -wi.y, wi.z);
         let peak_geom = PairGeometry::new(wi, mirror).unwrap();
         let peak_power = |n: i64, lambda: f64| orders.power(n, lambda, wi, mirror);
         let peak_at = |n: i64, j: usize| peak_power(n, lambdas[j]);
-        let peak = surface.kernel_rgb_general(
-            &peak_geom,
-            OrderWeights::Given {
-                power: &peak_power,
-                at_node: &peak_at,
-            },
-        );
+        let peak = given_rgb(&surface, &peak_geom, &peak_power, &peak_at);
         let scale = peak.iter().fold(0.0f64, |a, &b| a.max(b.abs()));
         if scale > 0.0 {
             let e = (0..3)
@@ -700,19 +702,10 @@ fn order_zero_spectra_agree_with_the_table() {
 /// both against the solver itself at each node (N as the table's).
 #[test]
 fn order_zero_grid_and_table_against_the_solver_at_the_mirror() {
-    use super::rigorous::RigorousOrders;
-    use super::{OrderWeights, PeriodicSurface};
-    use crate::optics::fresnel::{metal_by_name, Fresnel};
+    use super::PeriodicSurface;
     use crate::optics::geometry::PairGeometry;
     let n_fourier = crate::rigorous::default_fourier_orders(CD_PERIOD_UM, 1.0);
-    let orders = RigorousOrders::new(
-        CD_PERIOD_UM,
-        &disc_grating().profile,
-        &Fresnel::metal(metal_by_name("aluminium").unwrap()),
-        n_fourier,
-        1.0,
-    )
-    .unwrap();
+    let orders = disc_orders();
     let g = disc_grating();
     let lambdas = PeriodicSurface::given_broad_wavelengths();
     let surface = PeriodicSurface::new(CD_PERIOD_UM, 50.0, disc_grating().profile).unwrap();
@@ -759,15 +752,8 @@ fn order_zero_grid_and_table_against_the_solver_at_the_mirror() {
             .collect();
         let grid = orders.order_zero_at_nodes(wi, wo);
         let power = |n: i64, lambda: f64| orders.power(n, lambda, wi, wo);
-        let kernel = |at_node: &dyn Fn(i64, usize) -> f64| {
-            surface.kernel_rgb_general(
-                &geom,
-                OrderWeights::Given {
-                    power: &power,
-                    at_node,
-                },
-            )
-        };
+        let kernel =
+            |at_node: &dyn Fn(i64, usize) -> f64| given_rgb(&surface, &geom, &power, at_node);
         let from_solver = kernel(&|n: i64, j: usize| if n == 0 { solved[j] } else { 0.0 });
         let from_grid = kernel(&|n: i64, j: usize| if n == 0 { grid[j] } else { 0.0 });
         let from_table =
