@@ -67,15 +67,11 @@ template <typename Float> struct PluginParam {
     }
 };
 
-/// The STAM_PARAM_* id of a numeric parameter's name, -1 for none
+/// The STAM_PARAM_* id of a numeric parameter's name (the core's
+/// stam_param_name), -1 for none
 inline int param_id(const std::string &name) {
-    static const char *names[STAM_PARAMS] = { "sigma_um",  "corr_um",   "corr_x_um",
-                                              "corr_y_um", "lag_um",    "period_um",
-                                              "height_um", "width_um",  "coherence_um",
-                                              "twist",     "fresnel",   "eta",
-                                              "k" };
     for (uint32_t id = 0; id < STAM_PARAMS; ++id)
-        if (name == names[id])
+        if (name == stam_param_name(id))
             return (int) id;
     return -1;
 }

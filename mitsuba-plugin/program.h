@@ -38,21 +38,23 @@ namespace program {
 
 namespace dr = ::drjit;
 
-/// Version of the array layout and of the operation set (the core's
-/// program::FORMAT).
-constexpr uint32_t Format = 4;
-/// Values before the outputs (program::HEADER_LEN).
-constexpr size_t HeaderLen = 8;
+/// Version of the array layout and of the operation set (stam.h).
+constexpr uint32_t Format = STAM_PROGRAM_FORMAT;
+/// Values before the outputs.
+constexpr size_t HeaderLen = STAM_PROGRAM_HEADER_LEN;
 
-/// Operation codes, as the core's `program::Op` (rust-core/src/program/mod.rs).
+/// Operation codes (stam.h's STAM_OP_*).
 enum class Op : uint32_t {
-    Input = 0, Const = 1, Add = 2, Sub = 3, Mul = 4, Div = 5, Min = 6, Max = 7,
-    Fma = 8, Neg = 9, Abs = 10, Sqrt = 11, Exp = 12, Log = 13, Sin = 14, Cos = 15,
-    Atan2 = 16, Floor = 17, Lt = 18, Le = 19, Gt = 20, Ge = 21, Eq = 22, Finite = 23,
-    And = 24, Or = 25, Not = 26, Select = 27, Gather = 28, Param = 29, If = 30,
-    EndIf = 31
+    Input = STAM_OP_INPUT, Const = STAM_OP_CONST, Add = STAM_OP_ADD, Sub = STAM_OP_SUB,
+    Mul = STAM_OP_MUL, Div = STAM_OP_DIV, Min = STAM_OP_MIN, Max = STAM_OP_MAX,
+    Fma = STAM_OP_FMA, Neg = STAM_OP_NEG, Abs = STAM_OP_ABS, Sqrt = STAM_OP_SQRT,
+    Exp = STAM_OP_EXP, Log = STAM_OP_LOG, Sin = STAM_OP_SIN, Cos = STAM_OP_COS,
+    Atan2 = STAM_OP_ATAN2, Floor = STAM_OP_FLOOR, Lt = STAM_OP_LT, Le = STAM_OP_LE,
+    Gt = STAM_OP_GT, Ge = STAM_OP_GE, Eq = STAM_OP_EQ, Finite = STAM_OP_FINITE,
+    And = STAM_OP_AND, Or = STAM_OP_OR, Not = STAM_OP_NOT, Select = STAM_OP_SELECT,
+    Gather = STAM_OP_GATHER, Param = STAM_OP_PARAM, If = STAM_OP_IF, EndIf = STAM_OP_END_IF
 };
-constexpr uint32_t OpCount = 32;
+constexpr uint32_t OpCount = STAM_OPS;
 
 /// The registers an operation reads (Gather reads only its index, b; If its
 /// mask, a; EndIf names its If in a, which is no read).

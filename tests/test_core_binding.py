@@ -506,27 +506,27 @@ def _ulp_nudged(rng, *arrays):
 
 
 def test_program_constants_are_the_header_and_the_core():
-    """The kinds are stam.h's STAM_PROGRAM_* (read from it), the op codes the
-    core's enum Op, the format the core's FORMAT (the Rust sources)."""
+    """The kinds, the array's format, the op names and the parameter names
+    are stam.h's (read from it; tests/abi compares them with the core's
+    values), and the parameter names are the core's (stam_param_name); the
+    core's executor refuses the op code after the last."""
     F = stam_core
     kinds = [F.PROGRAM_EVAL_RGB, F.PROGRAM_EVAL_SPECTRAL, F.PROGRAM_PDF_RGB,
              F.PROGRAM_PDF_SPECTRAL, F.PROGRAM_SAMPLE_RGB, F.PROGRAM_SAMPLE_SPECTRAL,
              F.PROGRAM_COHERENT_RGB, F.PROGRAM_COHERENT_SPECTRAL]
     assert kinds == list(range(8)) and F.PROGRAM_KINDS == 8
     assert sorted(F.PROGRAM_IO) == kinds
-    with open(os.path.join(ROOT, 'rust-core', 'src', 'program', 'mod.rs')) as f:
-        src = f.read()
-    enum = re.search(r'pub enum Op \{(.*?)\n\}', src, re.S).group(1)
-    ops = re.findall(r'^\s*(\w+) = (\d+),', enum, re.M)
-    assert [(name, int(code)) for name, code in ops] == \
-        [(name, code) for code, name in enumerate(F.PROGRAM_OPS)]
-    assert int(re.search(r'pub const OP_COUNT: u32 = (\d+);', src).group(1)) == \
-        len(F.PROGRAM_OPS)
-    with open(os.path.join(ROOT, 'rust-core', 'src', 'program', 'encode.rs')) as f:
-        src = f.read()
-    assert int(re.search(r'pub const FORMAT: u32 = (\d+);', src).group(1)) == F.PROGRAM_FORMAT
-    assert int(re.search(r'pub const HEADER_LEN: usize = (\d+);', src).group(1)) == \
-        F.PROGRAM_HEADER_LEN
+    assert (F.PROGRAM_FORMAT, F.PROGRAM_HEADER_LEN) == (4, 8)
+    assert F.PROGRAM_OPS[:3] == ('Input', 'Const', 'Add') and F.PROGRAM_OPS[-1] == 'EndIf'
+    assert len(F.PROGRAM_OPS) == 32
+    names = [F.lib().stam_param_name(i).decode() for i in range(len(F.PROGRAM_PARAMS) + 1)]
+    assert names == list(F.PROGRAM_PARAMS) + ['']
+    assert 'period_um' in F.PROGRAM_PARAMS and 'sigma_um' in F.PROGRAM_PARAMS
+    last = _assemble(1, [('Input', 0, 0, 0), (len(F.PROGRAM_OPS) - 1, 0, 0, 0)], [0])
+    with pytest.raises(ValueError, match='not a program array'):
+        F.decode_program(_assemble(1, [('Input', 0, 0, 0), (len(F.PROGRAM_OPS), 0, 0, 0)], [0]))
+    with pytest.raises(ValueError, match='not a program array'):  # an EndIf with no If
+        F.decode_program(last)
 
 
 @pytest.mark.parametrize('entry', ALL_MATERIALS, ids=_names(ALL_MATERIALS))

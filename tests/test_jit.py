@@ -11,7 +11,7 @@ render does.
   relative, RGB within the model's documented RGB error (RGB_DOCUMENTED) of
   the pair's largest channel, at random, grazing and near-mirror directions;
 - pdf and sample against the core's exported programs run on the CPU
-  (run_program below, a numpy executor): the JIT path samples with the programs' strategy, which
+  (run_program below: the core's CPU executor, stam_program_run): the JIT path samples with the programs' strategy, which
   may be simpler than the core's native one; the sample's pdf is the pdf at
   its direction, weight * pdf = eval, the coherent lobe's weight R / P;
 - bad input (NaN, below the horizon, zero vectors, lambda = 0) gives finite,
@@ -293,115 +293,38 @@ def export_program(brdf, kind, at_built=False):
     return out
 
 
-# Operation codes of the core's programs (rust-core/src/program/mod.rs, Op).
-PROGRAM_OPS = ('input', 'const', 'add', 'sub', 'mul', 'div', 'min', 'max', 'fma', 'neg',
-               'abs', 'sqrt', 'exp', 'log', 'sin', 'cos', 'atan2', 'floor', 'lt', 'le', 'gt',
-               'ge', 'eq', 'finite', 'and', 'or', 'not', 'select', 'gather', 'param', 'if',
-               'endif')
-PROGRAM_FORMAT = 4
-PROGRAM_HEADER_LEN = 8
+# Operation names of the core's programs (stam.h's STAM_OP_*, lower case).
+PROGRAM_OPS = tuple(name.lower() for name in stam_core.PROGRAM_OPS)
+PROGRAM_HEADER_LEN = stam_core.PROGRAM_HEADER_LEN
 
 
 def program_stats(v):
     """{'inputs', 'outputs', 'instructions', 'gathers', 'tables', 'table_values',
-    'params'}
-    of an exported program array (its header and code, unchecked)."""
-    v = np.asarray(v, dtype=np.float32)
-    n_out, n_code, n_tab, n_par = int(v[2]), int(v[3]), int(v[4]), int(v[6])
-    code_at = PROGRAM_HEADER_LEN + n_out + 2 * n_tab + 2 * n_par
-    ops = v[code_at:code_at + 4 * n_code:4].astype(int)
-    lens = v[PROGRAM_HEADER_LEN + n_out + 1:PROGRAM_HEADER_LEN + n_out + 2 * n_tab:2].astype(int)
-    return {'inputs': int(v[1]), 'outputs': n_out, 'instructions': n_code,
-            'gathers': int(np.sum(ops == PROGRAM_OPS.index('gather'))), 'tables': n_tab,
-            'table_values': int(lens.sum()), 'params': n_par}
+    'params'} of an exported program array (stam_core.decode_program)."""
+    p = stam_core.decode_program(v)
+    gather = PROGRAM_OPS.index('gather')
+    return {'inputs': p.n_inputs, 'outputs': len(p.outputs), 'instructions': len(p.code),
+            'gathers': sum(1 for c in p.code if c[0] == gather), 'tables': len(p.tables),
+            'table_values': int(sum(len(t) for t in p.tables)), 'params': len(p.params)}
 
 
 def run_program(v, inputs, dtype=np.float64, elementary=None, params=None):
-    """Run an exported program array on the CPU with numpy, lane by lane as
-    the core's executor (program::Program::run, rust-core/src/program/
-    interpret.rs): inputs is a sequence of n_inputs arrays (broadcast
-    together); returns the list of outputs. The reference of the plugin's
-    executor (mitsuba-plugin/program.h). elementary: {op: function} for
-    some of exp, log, sin, cos, atan2 (default numpy's). params: values by
-    parameter slot in place of the stored ones. A region (if .. endif) is
-    computed on every lane, its registers 0 (False) where its masks do
-    not hold, which is what skipping those lanes gives."""
-    v = np.asarray(v, dtype=np.float32)
-    if len(v) < PROGRAM_HEADER_LEN or int(v[0]) != PROGRAM_FORMAT or int(v[5]) != len(v):
-        raise ValueError('not a program array of format %d'
-                         % PROGRAM_FORMAT)
-    n_in, n_out, n_code, n_tab = (int(x) for x in v[1:5])
-    n_par = int(v[6])
-    if len(inputs) != n_in:
-        raise ValueError('the program takes %d inputs, %d given'
-                         % (n_in, len(inputs)))
-    dir_at = PROGRAM_HEADER_LEN + n_out
-    par_at = dir_at + 2 * n_tab
-    code_at = par_at + 2 * n_par
-    values = v[par_at + 1:code_at:2] if params is None else params
-    tables = [v[int(v[dir_at + 2 * t]):int(v[dir_at + 2 * t]) + int(v[dir_at + 2 * t + 1])]
-              for t in range(n_tab)]
+    """Runs an exported program array with the core's CPU executor
+    (stam_core.run_program, stam_program_run: the reference of the plugin's
+    executor, mitsuba-plugin/program.h) in `dtype`: inputs is a sequence of
+    n_inputs arrays (broadcast together); returns the list of outputs.
+    elementary: {op: function} for some of exp, log, sin, cos, atan2
+    (float32 only). params: values by parameter slot in place of the stored
+    ones."""
     ins = np.broadcast_arrays(*[np.asarray(x, dtype=dtype) for x in inputs])
-    regs = []
-    masks = []  # where each open region and those around it hold
-    with np.errstate(all='ignore'):
-        for i in range(n_code):
-            w = v[code_at + 4 * i:code_at + 4 * i + 4]
-            op = PROGRAM_OPS[int(w[0])]
-            if op == 'const':
-                regs.append(dtype(w[1]))
-                continue
-            a, b, c = (int(x) for x in w[1:])
-            if op in ('if', 'endif'):
-                if op == 'if':
-                    masks.append(regs[a] & masks[-1] if masks else regs[a])
-                else:
-                    masks.pop()
-                regs.append(None)
-                continue
-            if op == 'input':
-                r = ins[a]
-            elif op == 'param':
-                r = dtype(values[a])
-            elif op == 'gather':
-                t = tables[a]
-                x = np.asarray(regs[b], dtype=np.float64)
-                if len(t) == 0:
-                    r = np.zeros_like(x, dtype=dtype)
-                else:
-                    x = np.clip(np.where(np.isnan(x), 0.0, x), 0.0, len(t) - 1)
-                    r = t[x.astype(np.int64)].astype(dtype)
-            elif elementary and op in elementary:
-                r = elementary[op](*[regs[k] for k in (a, b)[:2 if op == 'atan2' else 1]])
-                r = np.asarray(r, dtype=dtype)
-            else:
-                A = regs[a]
-                B = regs[b] if b < len(regs) else None
-                C = regs[c] if c < len(regs) else None
-                r = {
-                    'add': lambda: A + B, 'sub': lambda: A - B, 'mul': lambda: A * B,
-                    'div': lambda: A / B, 'min': lambda: np.fmin(A, B),
-                    'max': lambda: np.fmax(A, B), 'fma': lambda: A * B + C,
-                    'neg': lambda: -A, 'abs': lambda: np.abs(A), 'sqrt': lambda: np.sqrt(A),
-                    'exp': lambda: np.exp(A), 'log': lambda: np.log(A),
-                    'sin': lambda: np.sin(A), 'cos': lambda: np.cos(A),
-                    'atan2': lambda: np.arctan2(A, B), 'floor': lambda: np.floor(A),
-                    'lt': lambda: A < B, 'le': lambda: A <= B, 'gt': lambda: A > B,
-                    'ge': lambda: A >= B, 'eq': lambda: A == B,
-                    'finite': lambda: np.isfinite(A), 'and': lambda: A & B,
-                    'or': lambda: A | B, 'not': lambda: ~np.asarray(A, dtype=bool),
-                    'select': lambda: np.where(A, B, C),
-                }[op]()
-                if r.dtype != bool:
-                    r = r.astype(dtype)
-            if masks:
-                r = np.where(masks[-1], r, False if np.asarray(r).dtype == bool else 0.0)
-                if r.dtype != bool:
-                    r = r.astype(dtype)
-            regs.append(r)
-    outs = [int(x) for x in v[PROGRAM_HEADER_LEN:PROGRAM_HEADER_LEN + n_out]]
-    shape = ins[0].shape if ins else ()
-    return [np.broadcast_to(np.asarray(regs[o], dtype=dtype), shape).copy() for o in outs]
+    p = stam_core.decode_program(v)
+    if len(ins) != p.n_inputs:
+        raise ValueError('the program takes %d inputs, %d given' % (p.n_inputs, len(ins)))
+    by_name = None if params is None else {name: value for (name, _), value
+                                           in zip(p.params, params)}
+    out = stam_core.run_program(p, np.stack(ins, axis=-1), params=by_name, dtype=dtype,
+                                elementary=elementary)
+    return [out[..., k].copy() for k in range(out.shape[-1])]
 
 # ---------------------------------------------------------------------------
 # eval against the core
@@ -794,7 +717,7 @@ def test_decoder_refuses_malformed_arrays(decoder, tmp_path):
     v = np.asarray(v, dtype=np.float32)
     st = program_stats(v)
     n_out, n_code, n_tab = st['outputs'], st['instructions'], st['tables']
-    code_at = 8 + n_out + 2 * n_tab + 2 * st['params']
+    code_at = PROGRAM_HEADER_LEN + n_out + 2 * n_tab + 2 * st['params']
 
     def with_(i, x):
         w = v.copy()

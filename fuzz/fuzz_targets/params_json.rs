@@ -108,6 +108,18 @@ fuzz_target!(|data: &[u8]| {
             assert!(array[0] == stam::program::FORMAT as f32 && array[5] == len as f32, "program header");
             let prog = stam::program::decode(&array).expect("an exported program decodes");
             assert!((prog.n_inputs, prog.outputs.len()) == IO[kind as usize], "program inputs / outputs");
+            // The ABI's executor refuses what is not a program; an unknown
+            // parameter id has no name.
+            {
+                let mut err = [0 as c_char; 64];
+                let null = std::ptr::null::<f32>();
+                let (null64, none) = (std::ptr::null::<f64>(), std::ptr::null_mut());
+                let mut out = [0.0f32; 4];
+                let mut out64 = [0.0f64; 4];
+                assert!(stam_program_run(null, 0, null, 1, null, 0, out.as_mut_ptr(), None, None, none, err.as_mut_ptr(), err.len()) == 0);
+                assert!(stam_program_run_f64(array.as_ptr(), array.len() - 1, null64, 0, null64, 0, out64.as_mut_ptr(), err.as_mut_ptr(), err.len()) == 0);
+                assert!(*stam_param_name(stam::program::PARAM_COUNT) == 0);
+            }
             let sampling = kind / 2 == 2;
             for i in 0..n {
                 for fold in [false, true].into_iter().take(if sampling { 2 } else { 1 }) {
@@ -123,6 +135,11 @@ fuzz_target!(|data: &[u8]| {
                         inputs.push(lam[i]);
                     }
                     let out = prog.run::<f32>(&inputs);
+                    // The ABI's executor gives the lane-by-lane one's bits.
+                    let mut abi = vec![0.0f32; out.len()];
+                    let mut err = [0 as c_char; 64];
+                    let ran = stam_program_run(array.as_ptr(), array.len(), inputs.as_ptr(), 1, std::ptr::null(), 0, abi.as_mut_ptr(), None, None, std::ptr::null_mut(), err.as_mut_ptr(), err.len());
+                    assert!(ran == 1 && abi.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits()), "stam_program_run differs");
                     if sampling {
                         assert!(out[3] == 0.0 || out[3] == 1.0, "a sample's coherent flag {}", out[3]);
                         if u.iter().all(|x| (0.0..=1.0).contains(x)) {

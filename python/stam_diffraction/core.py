@@ -72,12 +72,19 @@ SRGB_LUMINANCE = np.array(_header_luminance())
 SRGB_LUMINANCE.setflags(write=False)
 
 
-def _header_program_kinds(path=HEADER):
-    """{NAME: code} of the macros STAM_PROGRAM_<NAME> in stam.h."""
+def _header_macros(prefix, path=HEADER):
+    """{NAME: value} of the integer macros STAM_<prefix><NAME> in stam.h."""
     with open(path) as f:
         text = f.read()
     return {name: int(value) for name, value in
-            re.findall(r'^#define\s+STAM_PROGRAM_([A-Z_]+)\s+(\d+)u?\b', text, re.M)}
+            re.findall(r'^#define\s+STAM_%s([A-Z0-9_]+)\s+(\d+)u?(?=\s|$)' % prefix, text, re.M)}
+
+
+def _header_program_kinds(path=HEADER):
+    """{NAME: code} of the macros STAM_PROGRAM_<NAME> in stam.h (the kinds;
+    not the array's FORMAT and HEADER_LEN)."""
+    return {name: code for name, code in _header_macros('PROGRAM_', path).items()
+            if name not in ('FORMAT', 'HEADER_LEN')}
 
 
 _KINDS = _header_program_kinds()
@@ -116,41 +123,43 @@ PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
               PROGRAM_SAMPLE_RGB: (6, 4), PROGRAM_SAMPLE_SPECTRAL: (7, 4),
               PROGRAM_COHERENT_RGB: (3, 4), PROGRAM_COHERENT_SPECTRAL: (4, 2)}
 
-# The program array (format 4; rust-core/src/program/encode.rs): a header of
+# The program array (stam.h: STAM_PROGRAM_FORMAT, read from it): a header of
 # PROGRAM_HEADER_LEN values (format, inputs, outputs, instructions, tables,
 # total length, parameters, 0), the output registers, (offset, length) per
 # table, (id, value) per parameter (PROGRAM_PARAMS; a Param's a is its slot
 # in this list), four values per instruction (op code, a, b, c; a Const's a
 # is its value; an If's a is its mask, an EndIf's a its If), then the
 # tables' values. Integers are stored as floats.
-PROGRAM_FORMAT = 4
-PROGRAM_HEADER_LEN = 8
-# Operation codes, in code order (rust-core/src/program/mod.rs, enum Op).
-PROGRAM_OPS = ('Input', 'Const', 'Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Fma', 'Neg',
-               'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos', 'Atan2', 'Floor', 'Lt', 'Le', 'Gt',
-               'Ge', 'Eq', 'Finite', 'And', 'Or', 'Not', 'Select', 'Gather', 'Param', 'If',
-               'EndIf')
-# Parameter ids, in code order (rust-core/src/program/mod.rs, enum ParamId;
-# stam.h's STAM_PARAM_*): the material parameters' names.
-PROGRAM_PARAMS = ('sigma_um', 'corr_um', 'corr_x_um', 'corr_y_um', 'lag_um', 'period_um',
-                  'height_um', 'width_um', 'coherence_um', 'twist', 'fresnel', 'eta', 'k')
-_OP = {name: code for code, name in enumerate(PROGRAM_OPS)}
-_GIVES_MASK = frozenset(_OP[n] for n in ('Lt', 'Le', 'Gt', 'Ge', 'Eq', 'Finite', 'And', 'Or',
-                                         'Not'))
-# (EndIf names its If in a: no read.)
-_ARITY = dict([(_OP[n], 0) for n in ('Input', 'Const', 'Param', 'EndIf')]
-              + [(_OP[n], 1) for n in ('Neg', 'Abs', 'Sqrt', 'Exp', 'Log', 'Sin', 'Cos',
-                                       'Floor', 'Finite', 'Not', 'Gather', 'If')]
-              + [(_OP[n], 2) for n in ('Add', 'Sub', 'Mul', 'Div', 'Min', 'Max', 'Atan2',
-                                       'Lt', 'Le', 'Gt', 'Ge', 'Eq', 'And', 'Or')]
-              + [(_OP[n], 3) for n in ('Fma', 'Select')])
+_LAYOUT = _header_macros('PROGRAM_')
+PROGRAM_FORMAT = _LAYOUT['FORMAT']
+PROGRAM_HEADER_LEN = _LAYOUT['HEADER_LEN']
 
+
+def _header_names(prefix, count, spell):
+    """The names of the macros STAM_<prefix>* of stam.h in code order
+    (0 .. STAM_<count> - 1, each once), spelt by `spell`."""
+    codes = {code: name for name, code in _header_macros(prefix).items()}
+    n = _header_macros('')[count]
+    if sorted(codes) != list(range(n)):
+        raise RuntimeError('stam_diffraction.core: %s has the STAM_%s codes %s, not 0..%d'
+                           % (HEADER, prefix, sorted(codes), n - 1))
+    return tuple(spell(codes[k]) for k in range(n))
+
+
+# Operation names in code order (stam.h's STAM_OP_*: STAM_OP_END_IF is
+# 'EndIf').
+PROGRAM_OPS = _header_names('OP_', 'OPS', lambda n: n.title().replace('_', ''))
+# Parameter names in id order (stam.h's STAM_PARAM_*: STAM_PARAM_PERIOD_UM is
+# 'period_um', as stam_param_name gives it).
+PROGRAM_PARAMS = _header_names('PARAM_', 'PARAMS', str.lower)
+_OP = {name: code for code, name in enumerate(PROGRAM_OPS)}
 # A decoded program: n_inputs; outputs (registers); code, a list of
 # (op, a, b, c) with a Const's a its float32 value, a Gather's a its table
 # and a Param's a its parameter slot; tables, float32 arrays; params, a
-# tuple of (name, float32 value) per slot (names: PROGRAM_PARAMS).
-Program = collections.namedtuple('Program', 'n_inputs outputs code tables params',
-                                 defaults=((),))
+# tuple of (name, float32 value) per slot (names: PROGRAM_PARAMS); array,
+# the float32 array it was decoded from.
+Program = collections.namedtuple('Program', 'n_inputs outputs code tables params array',
+                                 defaults=((), None))
 
 _lib = None
 
@@ -171,6 +180,7 @@ def lib():
     L = ctypes.CDLL(path)
     vp, sz, fp = ctypes.c_void_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_float)
     u8p = ctypes.POINTER(ctypes.c_uint8)
+    dp = ctypes.POINTER(ctypes.c_double)
     sig = {
         'stam_brdf_new': (vp, [ctypes.c_char_p, ctypes.c_char_p, sz]),
         'stam_brdf_free': (None, [vp]),
@@ -194,6 +204,11 @@ def lib():
         'stam_version': (ctypes.c_char_p, []),
         'stam_rigorous_solve': (ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_char_p, sz]),
         'stam_text_free': (None, [ctypes.c_void_p]),
+        'stam_param_name': (ctypes.c_char_p, [ctypes.c_uint32]),
+        'stam_program_run': (ctypes.c_int, [fp, sz, fp, sz, fp, sz, fp, _ELEMENTARY, _REGION,
+                                            vp, ctypes.c_char_p, sz]),
+        'stam_program_run_f64': (ctypes.c_int, [fp, sz, dp, sz, dp, sz, dp, ctypes.c_char_p,
+                                                sz]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(L, name)
@@ -508,251 +523,137 @@ class Brdf:
 # -- programs -------------------------------------------------------------------
 
 
-def decode_program(array):
-    """The Program of an array of export_program, checked as the core's
-    decode checks it (rust-core/src/program/encode.rs): format, length,
-    sections inside the array, parameters known ids (each once) with finite
-    values, every Param reading one, every operand a register defined
-    before its use and of the right kind (float or mask; a region's markers
-    read by nothing), regions (If .. EndIf) nested with no Input, Const or
-    Param inside, outputs floats. Raises ValueError otherwise."""
-    v = np.asarray(array)
+def _program_array(program):
+    """The float32 array of a program (an array, or a decoded Program)."""
+    if isinstance(program, Program):
+        return program.array
+    v = np.asarray(program)
     if v.ndim != 1:
         raise ValueError('stam_diffraction.core: a program is a 1-D array, not %s' % (v.shape,))
-    v = v.astype(np.float32, copy=False)
+    return np.ascontiguousarray(v, dtype=np.float32)
 
-    def bad(what):
-        return ValueError('stam_diffraction.core: not a program array: %s' % what)
 
-    def integer(x, what):
-        x = float(x)
-        if not (0.0 <= x < 16777216.0 and x == int(x)):
-            raise bad('%s is %r, not an integer below 2^24' % (what, x))
-        return int(x)
-
-    if len(v) < PROGRAM_HEADER_LEN:
-        raise bad('%d values, shorter than the header' % len(v))
-    if integer(v[0], 'the format') != PROGRAM_FORMAT:
-        raise bad('format %g, not %d' % (v[0], PROGRAM_FORMAT))
-    n_inputs, n_out, n_code, n_tab, total, n_par = (integer(v[i], 'header value %d' % i)
-                                                    for i in range(1, 7))
-    if total != len(v):
-        raise bad('length %d, the header says %d' % (len(v), total))
-    if v[7] != 0:
-        raise bad('header value 7 is %r, not 0' % float(v[7]))
+def decode_program(array):
+    """The Program of an array of export_program, after the core's own
+    checks (stam_program_run's: rust-core/src/program/encode.rs `decode`):
+    format, length, sections inside the array, parameters known ids (each
+    once) with finite values, every Param reading one, every operand a
+    register defined before its use and of the right kind (float or mask; a
+    region's markers read by nothing), regions (If .. EndIf) nested with no
+    Input, Const or Param inside, outputs floats. Raises ValueError
+    otherwise, with the core's reason."""
+    v = _program_array(array)
+    err = ctypes.create_string_buffer(ERR_LEN)
+    # No lanes: the core only checks the array.
+    if not lib().stam_program_run(_ptr(v), len(v), None, 0, None, 0, None, _ELEMENTARY(),
+                                  _REGION(), None, err, len(err)):
+        raise ValueError('stam_diffraction.core: not a program array: %s' % err.value.decode())
+    n_inputs, n_out, n_code, n_tab, _, n_par = (int(x) for x in v[1:7])
     directory = PROGRAM_HEADER_LEN + n_out
     par_at = directory + 2 * n_tab
     code_at = par_at + 2 * n_par
-    code_end = code_at + 4 * n_code
-    if code_end > total:
-        raise bad('%d instructions and %d tables do not fit' % (n_code, n_tab))
-    tables = []
-    for t in range(n_tab):
-        off = integer(v[directory + 2 * t], 'table %d offset' % t)
-        length = integer(v[directory + 2 * t + 1], 'table %d length' % t)
-        if off < code_end or off + length > total:
-            raise bad('table %d at %d..%d' % (t, off, off + length))
-        tables.append(v[off:off + length].copy())
-    params = []
-    for k in range(n_par):
-        pid = integer(v[par_at + 2 * k], 'parameter %d id' % k)
-        if pid >= len(PROGRAM_PARAMS) or PROGRAM_PARAMS[pid] in (n for n, _ in params):
-            raise bad('parameter %d has the id %d' % (k, pid))
-        value = np.float32(v[par_at + 2 * k + 1])
-        if not np.isfinite(value):
-            raise bad('parameter %d (%s) is %r' % (k, PROGRAM_PARAMS[pid], float(value)))
-        params.append((PROGRAM_PARAMS[pid], value))
-    code, is_mask, open_ifs = [], [], []
-    for i in range(n_code):
-        w = v[code_at + 4 * i:code_at + 4 * i + 4]
-        op = integer(w[0], 'op code %d' % i)
-        if op >= len(PROGRAM_OPS):
-            raise bad('op code %d at instruction %d' % (op, i))
-        a = np.float32(w[1]) if op == _OP['Const'] else integer(w[1], 'operand a of %d' % i)
-        b, c = integer(w[2], 'operand b of %d' % i), integer(w[3], 'operand c of %d' % i)
-        if op == _OP['Input'] and a >= n_inputs:
-            raise bad('instruction %d reads input %d of %d' % (i, a, n_inputs))
-        if op == _OP['Gather'] and a >= n_tab:
-            raise bad('instruction %d gathers from table %d of %d' % (i, a, n_tab))
-        if op == _OP['Param'] and a >= n_par:
-            raise bad('instruction %d reads parameter %d of %d' % (i, a, n_par))
-        if op in (_OP['Input'], _OP['Const'], _OP['Param']) and open_ifs:
-            raise bad('instruction %d (%s) lies inside a region' % (i, PROGRAM_OPS[op]))
-        if op == _OP['EndIf'] and (not open_ifs or open_ifs.pop() != a):
-            raise bad('instruction %d ends a region that is not the innermost open one' % i)
-        operands = [b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]]
-        for k, r in enumerate(operands):
-            wants_mask = (op in (_OP['And'], _OP['Or'], _OP['Not'], _OP['If'])
-                          or (op == _OP['Select'] and k == 0))
-            if r >= i or is_mask[r] != wants_mask:
-                raise bad('instruction %d (%s) reads register %d' % (i, PROGRAM_OPS[op], r))
-        if op == _OP['If']:
-            open_ifs.append(i)
-        # None: a region's marker, which nothing reads.
-        is_mask.append(None if op in (_OP['If'], _OP['EndIf']) else op in _GIVES_MASK)
-        code.append((op, a, b, c))
-    if open_ifs:
-        raise bad('a region is not closed')
-    outputs = []
-    for k in range(n_out):
-        r = integer(v[PROGRAM_HEADER_LEN + k], 'output %d' % k)
-        if r >= n_code or is_mask[r] is not False:
-            raise bad('output %d is register %d' % (k, r))
-        outputs.append(r)
-    return Program(n_inputs, tuple(outputs), code, tables, tuple(params))
+    tables = [v[int(v[directory + 2 * t]):][:int(v[directory + 2 * t + 1])].copy()
+              for t in range(n_tab)]
+    params = tuple((PROGRAM_PARAMS[int(v[par_at + 2 * k])], np.float32(v[par_at + 2 * k + 1]))
+                   for k in range(n_par))
+    words = v[code_at:code_at + 4 * n_code].reshape(n_code, 4)
+    const = _OP['Const']
+    code = [(int(w[0]), w[1] if int(w[0]) == const else int(w[1]), int(w[2]), int(w[3]))
+            for w in words]
+    outputs = tuple(int(r) for r in v[PROGRAM_HEADER_LEN:PROGRAM_HEADER_LEN + n_out])
+    return Program(n_inputs, outputs, code, tables, params, v)
 
 
-def _fma32(a, b, c):
-    """a * b + c rounded once to float32 (f32::mul_add): the product is exact
-    in float64; the float64 sum, made round-to-odd with its exact error
-    (TwoSum), then rounds to float32 as the exact value would."""
-    a, b, c = (np.asarray(x, dtype=np.float64) for x in (a, b, c))
-    p = a * b
-    s = p + c
-    bv = s - p
-    err = (p - (s - bv)) + (c - bv)
-    even = (np.asarray(s).view(np.int64) & 1) == 0
-    fix = (err != 0) & np.isfinite(err) & even
-    s = np.where(fix, np.nextafter(s, np.where(err > 0, np.inf, -np.inf)), s)
-    return s.astype(np.float32)
+# stam_program_run's hooks (stam.h: stam_program_elementary, stam_program_region).
+_ELEMENTARY = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_uint32, ctypes.c_size_t,
+                               ctypes.POINTER(ctypes.c_float), ctypes.POINTER(ctypes.c_float),
+                               ctypes.POINTER(ctypes.c_float))
+_REGION = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_size_t,
+                           ctypes.c_size_t, ctypes.POINTER(ctypes.c_uint8))
+_ELEMENTARY_NAMES = {_OP[n]: n.lower() for n in ('Exp', 'Log', 'Sin', 'Cos', 'Atan2')}
 
 
-def run_program(program, inputs, params=None, on_region=None):
+def run_program(program, inputs, params=None, on_region=None, dtype=np.float32,
+                elementary=None):
     """Runs a program (an array of Brdf.export_program, or a decoded
-    Program) on lanes of inputs (..., n_inputs): float32 outputs (...,
-    n_outputs). params: {name: value} overriding the values the program's
-    parameters were built with (names: PROGRAM_PARAMS; a name the program
-    does not read is an error); Param gives the value (float32) to every
-    lane. Every operation as the core's executor
-    (rust-core/src/program/interpret.rs) does it, in float32: +, -, *, /,
-    sqrt, floor correctly rounded; min/max return the other operand where
-    one is NaN (the sign of a zero they return is unspecified, as there);
-    Fma rounds once; comparisons give masks (1 or 0) that And/Or/Not/Select
-    read as > 0; Gather reads table a at index b clamped into [0, len - 1]
-    (NaN to 0), then truncated (an empty table gives 0). exp, log, sin, cos
-    and atan2 are taken in float64 and rounded to float32: correctly
-    rounded but for rare ties, as the C library's float32 functions the
-    core calls are to within an ulp. A region (If .. EndIf) is computed on
-    every lane and its registers set to 0 (False) on the lanes its masks
-    exclude, which is what skipping them gives. on_region(position, mask),
-    where given, is called at each If with its position in the code and the
-    lanes it holds on (its mask and every enclosing one's; scripts/
-    program_regions.py counts what a SIMD packet runs from them)."""
+    Program) on lanes of inputs (..., n_inputs): outputs (..., n_outputs)
+    of `dtype`. The core's CPU executor (stam_program_run: every operation
+    as a renderer's float32 kernel computes it; a region's registers are 0
+    on the lanes it does not run on); dtype=np.float64 runs the same
+    operations in float64 (stam_program_run_f64), to tell a program's logic
+    from float32 rounding. params: {name: value} overriding the values the
+    program's parameters were built with (names: PROGRAM_PARAMS; a name the
+    program does not read is an error), the same for every lane.
+    elementary: {name: f} for some of 'exp', 'log', 'sin', 'cos' (f(a)) and
+    'atan2' (f(a, b)), functions of float32 arrays used in place of the
+    core's (a test passes Dr.Jit's own). on_region(position, mask), where
+    given, is called at each If with its position in the code and the
+    lanes it runs on (its mask and every enclosing one's; scripts/
+    program_regions.py counts what a SIMD packet runs from them). The last
+    two only with float32."""
     p = program if isinstance(program, Program) else decode_program(program)
-    x = np.asarray(inputs, dtype=np.float32)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise ValueError('stam_diffraction.core: run_program runs float32 or float64, not %s'
+                         % dtype)
+    if dtype == np.float64 and (elementary or on_region):
+        raise ValueError('stam_diffraction.core: elementary and on_region need float32')
+    x = np.asarray(inputs, dtype=dtype)
     if x.ndim == 0 or x.shape[-1] != p.n_inputs:
         raise ValueError('stam_diffraction.core: the program takes inputs (..., %d), not %s'
                          % (p.n_inputs, x.shape))
     shape = x.shape[:-1]
-    x = x.reshape(-1, p.n_inputs)
-    values = [value for _, value in p.params]
+    x = np.ascontiguousarray(x.reshape(-1, p.n_inputs))
     names = [name for name, _ in p.params]
+    values = np.array([value for _, value in p.params], dtype=dtype)
     for name, value in (params or {}).items():
         if name not in names:
             raise ValueError('stam_diffraction.core: the program reads no parameter %r (it reads %s)'
                              % (name, ', '.join(names) or 'none'))
-        values[names.index(name)] = np.float32(value)
-    # Registers are dropped after their last reader (memory: the live
-    # registers times the lanes, not the program's length).
-    reads = [[b] if op == _OP['Gather'] else [a, b, c][:_ARITY[op]] for op, a, b, c in p.code]
-    last = {}
-    for i, rs in enumerate(reads):
-        for r in rs:
-            last[r] = i
-    for r in p.outputs:
-        last[r] = len(p.code)
-    dead_after = collections.defaultdict(list)
-    for r, i in last.items():
-        dead_after[i].append(r)
-    regs = []
-    f32 = np.float32
+        values[names.index(name)] = value
+    lanes = len(x)
+    out = np.zeros((lanes, len(p.outputs)), dtype=dtype)
+    err = ctypes.create_string_buffer(ERR_LEN)
+    v = p.array
+    fp = ctypes.POINTER(ctypes.c_double if dtype == np.float64 else ctypes.c_float)
 
-    def f64(v):
-        return np.asarray(v, dtype=np.float64)
+    def ptr(a):
+        return a.ctypes.data_as(fp) if a.size else None
+    if dtype == np.float64:
+        ok = lib().stam_program_run_f64(_ptr(v), len(v), ptr(x), lanes, ptr(values), len(values),
+                                        ptr(out), err, len(err))
+    else:
+        failure = []
+        # Regions inside one that no lane of a batch runs are not reported
+        # for that batch: none of its lanes runs them.
+        masks = {i: np.zeros(lanes, dtype=bool) for i, c in enumerate(p.code)
+                 if c[0] == _OP['If']} if on_region else {}
 
-    # Per open region: where it and every region around it hold.
-    masks = []
-    with np.errstate(all='ignore'):
-        for op, a, b, c in p.code:
-            name = PROGRAM_OPS[op]
-            r = regs
-            if name in ('If', 'EndIf'):
-                if name == 'If':
-                    masks.append(masks[-1] & r[a] if masks else r[a])
-                    if on_region is not None:
-                        on_region(len(regs), masks[-1])
-                else:
-                    masks.pop()
-                regs.append(np.zeros((), f32))
-                continue
-            if name == 'Input':
-                v = x[:, a]
-            elif name == 'Const':
-                v = np.asarray(a, dtype=f32)
-            elif name == 'Param':
-                v = np.asarray(values[a], dtype=f32)
-            elif name == 'Add':
-                v = r[a] + r[b]
-            elif name == 'Sub':
-                v = r[a] - r[b]
-            elif name == 'Mul':
-                v = r[a] * r[b]
-            elif name == 'Div':
-                v = r[a] / r[b]
-            elif name == 'Min':
-                v = np.fmin(r[a], r[b])
-            elif name == 'Max':
-                v = np.fmax(r[a], r[b])
-            elif name == 'Fma':
-                v = _fma32(r[a], r[b], r[c])
-            elif name == 'Neg':
-                v = -r[a]
-            elif name == 'Abs':
-                v = np.abs(r[a])
-            elif name == 'Sqrt':
-                v = np.sqrt(r[a])
-            elif name == 'Exp':
-                v = np.exp(f64(r[a]))
-            elif name == 'Log':
-                v = np.log(f64(r[a]))
-            elif name == 'Sin':
-                v = np.sin(f64(r[a]))
-            elif name == 'Cos':
-                v = np.cos(f64(r[a]))
-            elif name == 'Atan2':
-                v = np.arctan2(f64(r[a]), f64(r[b]))
-            elif name == 'Floor':
-                v = np.floor(r[a])
-            elif name == 'Lt':
-                v = r[a] < r[b]
-            elif name == 'Le':
-                v = r[a] <= r[b]
-            elif name == 'Gt':
-                v = r[a] > r[b]
-            elif name == 'Ge':
-                v = r[a] >= r[b]
-            elif name == 'Eq':
-                v = r[a] == r[b]
-            elif name == 'Finite':
-                v = np.isfinite(r[a])
-            elif name == 'And':
-                v = r[a] & r[b]
-            elif name == 'Or':
-                v = r[a] | r[b]
-            elif name == 'Not':
-                v = ~r[a]
-            elif name == 'Select':
-                v = np.where(r[a], r[b], r[c])
-            else:  # Gather
-                t = p.tables[a]
-                i = np.asarray(r[b], dtype=np.float64)
-                i = np.where(np.isnan(i), 0.0, np.clip(i, 0.0, max(len(t), 1) - 1))
-                v = t[i.astype(np.int64)] if len(t) else np.zeros(i.shape, f32)
-            if masks:
-                v = np.where(masks[-1], v, False if op in _GIVES_MASK else 0.0)
-            regs.append(np.asarray(v, dtype=bool if op in _GIVES_MASK else f32))
-            for r in dead_after.get(len(regs) - 1, ()):
-                regs[r] = None
-    out = np.stack([np.broadcast_to(regs[k], (len(x),)) for k in p.outputs], axis=-1) \
-        if p.outputs else np.zeros((len(x), 0), f32)
-    return out.astype(f32).reshape(shape + (len(p.outputs),))
+        def call_elementary(_user, op, n, a, b, result):
+            f = (elementary or {}).get(_ELEMENTARY_NAMES.get(op))
+            if f is None:
+                return 0
+            try:
+                args = [np.ctypeslib.as_array(a, (n,))]
+                if b:
+                    args.append(np.ctypeslib.as_array(b, (n,)))
+                np.ctypeslib.as_array(result, (n,))[:] = np.asarray(f(*args), dtype=np.float32)
+                return 1
+            except BaseException as e:  # never into the core: re-raised below
+                failure.append(e)
+                return 0
+
+        def call_region(_user, position, first, n, runs):
+            masks[position][first:first + n] = np.ctypeslib.as_array(runs, (n,)) != 0
+        # (a hook's type called with nothing: the NULL function)
+        hooks = (_ELEMENTARY(call_elementary) if elementary else _ELEMENTARY(),
+                 _REGION(call_region) if on_region else _REGION())
+        ok = lib().stam_program_run(_ptr(v), len(v), ptr(x), lanes, ptr(values), len(values),
+                                    ptr(out), hooks[0], hooks[1], None, err, len(err))
+        if failure:
+            raise failure[0]
+        for position in sorted(masks):
+            on_region(position, masks[position])
+    if not ok:
+        raise ValueError('stam_diffraction.core: %s' % err.value.decode())
+    return out.reshape(shape + (len(p.outputs),))

@@ -132,9 +132,10 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 /* Programs for renderers that trace their code (Dr.Jit's symbolic loops
  * and calls, dr.freeze, CUDA; docs/jit.md): straight-line array operations
  * and the tables they read, which compute what the functions above compute.
- * Layout of the float array and the operation codes: docs/jit.md (format
- * 4). Each kind takes its inputs and gives its outputs in this order
- * (directions in the local frame, lambda in nm, u uniforms in [0, 1)):
+ * The array's layout and operation codes: STAM_PROGRAM_FORMAT below (and
+ * docs/jit.md). Each kind takes its inputs and gives its outputs in this
+ * order (directions in the local frame, lambda in nm, u uniforms in
+ * [0, 1)):
  *   EVAL_RGB          wi[3] wo[3]        -> f R, G, B (no cos, no coherent lobe)
  *   EVAL_SPECTRAL     wi[3] wo[3] lambda -> f
  *   PDF_RGB           wi[3] wo[3]        -> glossy density at wo (RGB strategy)
@@ -185,6 +186,84 @@ size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
 #define STAM_PARAM_ETA 11u
 #define STAM_PARAM_K 12u
 #define STAM_PARAMS 13u
+
+/* The name of parameter id `id` (the material's JSON key, e.g. "period_um"
+ * for STAM_PARAM_PERIOD_UM); "" for an unknown id. A static string. */
+const char *stam_param_name(uint32_t id);
+
+/* The program array (what stam_brdf_export_program writes; docs/jit.md):
+ * STAM_PROGRAM_HEADER_LEN header values (STAM_PROGRAM_FORMAT, inputs,
+ * outputs, instructions, tables, total length, parameters, 0), the output
+ * registers, (offset, length) per table, (STAM_PARAM_* id, value) per
+ * parameter, four values per instruction (STAM_OP_* code, a, b, c;
+ * register i is instruction i's result), then the tables' values; integers
+ * stored as floats. Operation codes (their operands registers unless said;
+ * a mask is 1 or 0, read as > 0): */
+#define STAM_PROGRAM_FORMAT 4u
+#define STAM_PROGRAM_HEADER_LEN 8u
+#define STAM_OP_INPUT 0u /* input a */
+#define STAM_OP_CONST 1u /* the float whose bits are a */
+#define STAM_OP_ADD 2u
+#define STAM_OP_SUB 3u
+#define STAM_OP_MUL 4u
+#define STAM_OP_DIV 5u
+#define STAM_OP_MIN 6u
+#define STAM_OP_MAX 7u
+#define STAM_OP_FMA 8u /* a * b + c, rounded once */
+#define STAM_OP_NEG 9u
+#define STAM_OP_ABS 10u
+#define STAM_OP_SQRT 11u
+#define STAM_OP_EXP 12u
+#define STAM_OP_LOG 13u /* natural logarithm */
+#define STAM_OP_SIN 14u
+#define STAM_OP_COS 15u
+#define STAM_OP_ATAN2 16u /* the angle of (b, a) */
+#define STAM_OP_FLOOR 17u
+#define STAM_OP_LT 18u /* masks (1 or 0) from floats */
+#define STAM_OP_LE 19u
+#define STAM_OP_GT 20u
+#define STAM_OP_GE 21u
+#define STAM_OP_EQ 22u
+#define STAM_OP_FINITE 23u /* a mask: a is neither NaN nor infinite */
+#define STAM_OP_AND 24u /* masks from masks */
+#define STAM_OP_OR 25u
+#define STAM_OP_NOT 26u
+#define STAM_OP_SELECT 27u /* mask a ? b : c */
+#define STAM_OP_GATHER 28u /* table a at float index b (clamped into the table, NaN to 0, truncated) */
+#define STAM_OP_PARAM 29u /* the parameter in slot a */
+#define STAM_OP_IF 30u /* a region that runs where mask a holds (no value) */
+#define STAM_OP_END_IF 31u /* the end of the region whose IF is register a */
+#define STAM_OPS 32u
+
+/* The core's CPU executor of a program array, for checks outside a
+ * renderer: `lanes` lanes of inputs (lane-major, n_inputs floats each) into
+ * outputs (lane-major, n_outputs each), every operation as a renderer's f32
+ * kernel computes it (a region's registers are 0 on the lanes it does not
+ * run on). param_values: NULL for the values the program was built with,
+ * else one per parameter slot (n_param_values must be the program's
+ * count). Optional hooks, called with `user`:
+ *   elementary(user, op, n, a, b, out): STAM_OP_EXP, LOG, SIN, COS or ATAN2
+ *     (b NULL but for ATAN2) of n lanes into out, returning 1, or 0 to
+ *     leave it to the executor (a test passes its renderer's functions);
+ *   on_region(user, position, first_lane, n, runs): at each IF (register
+ *     `position`), whether each of n lanes from first_lane runs the region
+ *     (1 or 0; its mask and every enclosing region's). Lanes are run in
+ *     batches, so a region is reported once per batch.
+ * Returns 1, or 0 with the reason in err (the array is not a valid program
+ * of this format, a NULL array, a wrong parameter count). */
+typedef int (*stam_program_elementary)(void *user, uint32_t op, size_t lanes, const float *a,
+                                       const float *b, float *out);
+typedef void (*stam_program_region)(void *user, size_t position, size_t first_lane,
+                                    size_t lanes, const uint8_t *runs);
+int stam_program_run(const float *program, size_t program_len, const float *inputs,
+                     size_t lanes, const float *param_values, size_t n_param_values,
+                     float *outputs, stam_program_elementary elementary,
+                     stam_program_region on_region, void *user, char *err, size_t err_len);
+/* stam_program_run in f64 arithmetic (to tell a program's logic from f32
+ * rounding), without hooks. */
+int stam_program_run_f64(const float *program, size_t program_len, const double *inputs,
+                         size_t lanes, const double *param_values, size_t n_param_values,
+                         double *outputs, char *err, size_t err_len);
 
 /* Plausibility warnings of the material's parameters, one per line (no
  * trailing newline), "" when there are none or b is NULL: values that were

@@ -2,7 +2,7 @@
 //! renderer's kernels do) or f64 (to tell the program's logic from f32
 //! rounding in tests).
 
-use super::{Op, Program};
+use super::{Instr, Op, Program};
 
 /// The arithmetic an executor needs from its float type.
 pub trait Lane: Copy + PartialOrd {
@@ -109,7 +109,6 @@ impl Program {
         assert_eq!(params.len(), self.params.len(), "parameter values");
         regs.clear();
         regs.reserve(self.code.len());
-        let flag = |m: bool| if m { T::one() } else { T::zero() };
         let code = &self.code;
         let mut i = 0;
         while i < code.len() {
@@ -129,60 +128,76 @@ impl Program {
                 continue;
             }
             i += 1;
-            let r = |i: u32| regs[i as usize];
-            let v = match ins.op {
-                Op::Input => inputs[ins.a as usize],
-                Op::Const => T::from_f32(f32::from_bits(ins.a)),
-                Op::Param => params[ins.a as usize],
-                Op::Add => r(ins.a).add(r(ins.b)),
-                Op::Sub => r(ins.a).sub(r(ins.b)),
-                Op::Mul => r(ins.a).mul(r(ins.b)),
-                Op::Div => r(ins.a).div(r(ins.b)),
-                Op::Min => r(ins.a).min(r(ins.b)),
-                Op::Max => r(ins.a).max(r(ins.b)),
-                Op::Fma => r(ins.a).fma(r(ins.b), r(ins.c)),
-                op @ (Op::Neg
-                | Op::Abs
-                | Op::Sqrt
-                | Op::Exp
-                | Op::Log
-                | Op::Sin
-                | Op::Cos
-                | Op::Floor) => r(ins.a).un(op),
-                Op::Atan2 => r(ins.a).atan2(r(ins.b)),
-                Op::Lt => flag(r(ins.a) < r(ins.b)),
-                Op::Le => flag(r(ins.a) <= r(ins.b)),
-                Op::Gt => flag(r(ins.a) > r(ins.b)),
-                Op::Ge => flag(r(ins.a) >= r(ins.b)),
-                Op::Eq => flag(r(ins.a) == r(ins.b)),
-                Op::Finite => flag(r(ins.a).is_finite()),
-                Op::And => flag(r(ins.a) > T::zero() && r(ins.b) > T::zero()),
-                Op::Or => flag(r(ins.a) > T::zero() || r(ins.b) > T::zero()),
-                Op::Not => flag(!(r(ins.a) > T::zero())),
-                Op::Select => {
-                    if r(ins.a) > T::zero() {
-                        r(ins.b)
-                    } else {
-                        r(ins.c)
-                    }
-                }
-                Op::Gather => {
-                    let t = &self.tables[ins.a as usize];
-                    let x = r(ins.b).to_f64();
-                    let i = if x.is_nan() {
-                        0
-                    } else {
-                        x.clamp(0.0, (t.len().max(1) - 1) as f64) as usize
-                    };
-                    T::from_f32(t.get(i).copied().unwrap_or(0.0))
-                }
-                // Taken (the lane skips it above); 0 as a register
-                Op::If | Op::EndIf => T::zero(),
-            };
+            let v = self.apply(ins, |k| inputs[k as usize], params, |k| regs[k as usize]);
             regs.push(v);
         }
         for (o, &r) in out.iter_mut().zip(&self.outputs) {
             *o = regs[r as usize];
+        }
+    }
+
+    /// One instruction's value on one lane: what every schedule of the
+    /// executor (`run_with_params_into` lane by lane, `columns.rs` over
+    /// lanes) computes, so that an operation's meaning is written once.
+    /// `input` and `reg` read the lane's inputs and registers; a region's
+    /// markers are 0.
+    #[inline(always)]
+    pub(super) fn apply<T: Lane>(
+        &self,
+        ins: &Instr,
+        input: impl Fn(u32) -> T,
+        params: &[T],
+        r: impl Fn(u32) -> T,
+    ) -> T {
+        let flag = |m: bool| if m { T::one() } else { T::zero() };
+        match ins.op {
+            Op::Input => input(ins.a),
+            Op::Const => T::from_f32(f32::from_bits(ins.a)),
+            Op::Param => params[ins.a as usize],
+            Op::Add => r(ins.a).add(r(ins.b)),
+            Op::Sub => r(ins.a).sub(r(ins.b)),
+            Op::Mul => r(ins.a).mul(r(ins.b)),
+            Op::Div => r(ins.a).div(r(ins.b)),
+            Op::Min => r(ins.a).min(r(ins.b)),
+            Op::Max => r(ins.a).max(r(ins.b)),
+            Op::Fma => r(ins.a).fma(r(ins.b), r(ins.c)),
+            op @ (Op::Neg
+            | Op::Abs
+            | Op::Sqrt
+            | Op::Exp
+            | Op::Log
+            | Op::Sin
+            | Op::Cos
+            | Op::Floor) => r(ins.a).un(op),
+            Op::Atan2 => r(ins.a).atan2(r(ins.b)),
+            Op::Lt => flag(r(ins.a) < r(ins.b)),
+            Op::Le => flag(r(ins.a) <= r(ins.b)),
+            Op::Gt => flag(r(ins.a) > r(ins.b)),
+            Op::Ge => flag(r(ins.a) >= r(ins.b)),
+            Op::Eq => flag(r(ins.a) == r(ins.b)),
+            Op::Finite => flag(r(ins.a).is_finite()),
+            Op::And => flag(r(ins.a) > T::zero() && r(ins.b) > T::zero()),
+            Op::Or => flag(r(ins.a) > T::zero() || r(ins.b) > T::zero()),
+            Op::Not => flag(!(r(ins.a) > T::zero())),
+            Op::Select => {
+                if r(ins.a) > T::zero() {
+                    r(ins.b)
+                } else {
+                    r(ins.c)
+                }
+            }
+            Op::Gather => {
+                let t = &self.tables[ins.a as usize];
+                let x = r(ins.b).to_f64();
+                let i = if x.is_nan() {
+                    0
+                } else {
+                    x.clamp(0.0, (t.len().max(1) - 1) as f64) as usize
+                };
+                T::from_f32(t.get(i).copied().unwrap_or(0.0))
+            }
+            // A region's markers hold no value: 0 as a register
+            Op::If | Op::EndIf => T::zero(),
         }
     }
 

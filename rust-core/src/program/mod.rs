@@ -16,6 +16,7 @@
 //! plugin executes them with Dr.Jit, and [`Program::run`] executes them on
 //! the CPU, so that tests compare a program against the native path.
 
+mod batch;
 mod builder;
 mod encode;
 mod interpret;
@@ -24,8 +25,10 @@ pub mod special;
 #[cfg(test)]
 mod tests;
 
+pub use batch::{BatchHooks, NoHooks, BATCH_LANES};
 pub use builder::{Builder, Mask, Table, Value};
 pub use encode::{decode, FORMAT, HEADER_LEN};
+pub use interpret::Lane;
 
 /// Operation codes (the plugin's executor mirrors them: program.h).
 #[repr(u32)]
@@ -170,21 +173,26 @@ impl ParamId {
 
     /// The material parameter's name (the JSON key).
     pub fn name(self) -> &'static str {
+        self.c_name().to_str().unwrap_or_default()
+    }
+
+    /// `name` as a C string (`stam_param_name`).
+    pub fn c_name(self) -> &'static std::ffi::CStr {
         use ParamId::*;
         match self {
-            SigmaUm => "sigma_um",
-            CorrUm => "corr_um",
-            CorrXUm => "corr_x_um",
-            CorrYUm => "corr_y_um",
-            LagUm => "lag_um",
-            PeriodUm => "period_um",
-            HeightUm => "height_um",
-            WidthUm => "width_um",
-            CoherenceUm => "coherence_um",
-            Twist => "twist",
-            Fresnel => "fresnel",
-            Eta => "eta",
-            K => "k",
+            SigmaUm => c"sigma_um",
+            CorrUm => c"corr_um",
+            CorrXUm => c"corr_x_um",
+            CorrYUm => c"corr_y_um",
+            LagUm => c"lag_um",
+            PeriodUm => c"period_um",
+            HeightUm => c"height_um",
+            WidthUm => c"width_um",
+            CoherenceUm => c"coherence_um",
+            Twist => c"twist",
+            Fresnel => c"fresnel",
+            Eta => c"eta",
+            K => c"k",
         }
     }
 }

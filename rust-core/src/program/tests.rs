@@ -191,3 +191,107 @@ fn a_region_keeps_its_values() {
     });
     let _ = leaked.unwrap() + 1.0;
 }
+
+/// Hooks that record what they see and compute exp themselves (as
+/// exp(x) + 1, so that their use shows).
+#[derive(Default)]
+struct Recording {
+    elementary: usize,
+    regions: Vec<(usize, usize, Vec<bool>)>,
+}
+
+impl super::BatchHooks<f32> for Recording {
+    fn elementary(&mut self, op: Op, a: &[f32], _b: &[f32], out: &mut [f32]) -> bool {
+        self.elementary += 1;
+        if op != Op::Exp {
+            return false;
+        }
+        for (o, x) in out.iter_mut().zip(a) {
+            *o = x.exp() + 1.0;
+        }
+        true
+    }
+
+    fn region(&mut self, position: usize, first_lane: usize, runs: &[bool]) {
+        self.regions.push((position, first_lane, runs.to_vec()));
+    }
+}
+
+#[test]
+fn the_batch_schedule_equals_the_lane_by_lane_one() {
+    // Nested regions, over more lanes than a batch: the same bits as the
+    // lane-by-lane run, in f32 and f64; the regions reported per batch
+    // with the lanes that run them, none inside a region no lane runs.
+    let p = regions();
+    let lanes = super::BATCH_LANES + 5;
+    let xs: Vec<f32> = (0..lanes)
+        .map(|i| match i % 4 {
+            0 => f32::NAN,
+            _ => (i % 7) as f32 * 0.4 - 0.9,
+        })
+        .collect();
+    let mut out = vec![0.0f32; lanes * p.outputs.len()];
+    let mut hooks = Recording::default();
+    p.run_batch(&xs, lanes, &[], &mut hooks, &mut out);
+    let x64: Vec<f64> = xs.iter().map(|&x| x as f64).collect();
+    let mut out64 = vec![0.0f64; lanes * p.outputs.len()];
+    p.run_batch(&x64, lanes, &[], &mut super::NoHooks, &mut out64);
+    let n_out = p.outputs.len();
+    for (i, &x) in xs.iter().enumerate() {
+        let one = p.run::<f32>(&[x]);
+        let one64 = p.run::<f64>(&[x as f64]);
+        for k in 0..n_out {
+            assert_eq!(out[i * n_out + k].to_bits(), one[k].to_bits(), "lane {i}");
+            assert_eq!(
+                out64[i * n_out + k].to_bits(),
+                one64[k].to_bits(),
+                "lane {i}"
+            );
+        }
+    }
+    // Two regions in each of two batches, the second batch's masks its lanes'.
+    let ifs: Vec<usize> = (0..p.code.len())
+        .filter(|&i| p.code[i].op == Op::If)
+        .collect();
+    assert_eq!(hooks.regions.len(), 2 * ifs.len());
+    let (pos, first, runs) = &hooks.regions[ifs.len()];
+    assert_eq!((*pos, *first, runs.len()), (ifs[0], super::BATCH_LANES, 5));
+    for (l, &r) in runs.iter().enumerate() {
+        assert_eq!(
+            r,
+            xs[super::BATCH_LANES + l] > 0.0,
+            "lane {l} of the second batch"
+        );
+    }
+    // A batch where no lane runs the outer region: its inner one is not
+    // reported, and the outputs are still the lane-by-lane ones.
+    let mut hooks = Recording::default();
+    let negative = vec![-1.0f32; 3];
+    let mut out = vec![1.0f32; 3 * n_out];
+    p.run_batch(&negative, 3, &[], &mut hooks, &mut out);
+    assert_eq!(hooks.regions.len(), 1);
+    assert_eq!(out, p.run::<f32>(&[-1.0]).repeat(3));
+}
+
+#[test]
+fn the_batch_schedule_takes_the_callers_elementary_functions() {
+    // f = exp(x) and sin(x): exp from the hook (exp(x) + 1), sin the
+    // executor's (the hook declines); a uniform operand is computed once.
+    let b = Builder::new();
+    let x = b.input();
+    let c = b.c(0.5);
+    let f = x.exp();
+    let g = x.sin();
+    let h = c.exp();
+    let p = b.finish(&[f, g, h]);
+    let xs = [0.0f32, 1.0, -2.0];
+    let mut out = vec![0.0f32; 9];
+    let mut hooks = Recording::default();
+    p.run_batch(&xs, 3, &[], &mut hooks, &mut out);
+    for (i, &x) in xs.iter().enumerate() {
+        assert_eq!(out[3 * i], x.exp() + 1.0);
+        assert_eq!(out[3 * i + 1], x.sin());
+        assert_eq!(out[3 * i + 2], 0.5f32.exp() + 1.0);
+    }
+    assert_eq!(hooks.elementary, 3);
+}

@@ -182,6 +182,90 @@ static int check_export_program(const StamBrdf *b, char *report, size_t report_l
     return 0;
 }
 
+/* The hooks of stam_program_run: counting, and leaving the work to the
+ * executor (so the outputs must not change). */
+struct hook_counts {
+    size_t elementary, regions;
+};
+static int count_elementary(void *user, uint32_t op, size_t lanes, const float *a, const float *b,
+                            float *out) {
+    (void)op, (void)lanes, (void)a, (void)b, (void)out;
+    ((struct hook_counts *)user)->elementary++;
+    return 0;
+}
+static void count_region(void *user, size_t position, size_t first_lane, size_t lanes,
+                         const uint8_t *runs) {
+    (void)position, (void)first_lane, (void)lanes, (void)runs;
+    ((struct hook_counts *)user)->regions++;
+}
+
+/* Checks of stam_program_run, stam_program_run_f64 and stam_param_name:
+ * the eval program run on two lanes (normal and oblique mirror pairs) is
+ * finite and within 1e-3 of stam_brdf_eval_spectral, in f32 and f64, with
+ * and without hooks that decline (the same outputs, the hooks called);
+ * its parameters at their stored values give the same as none given; a
+ * wrong parameter count, a NULL or broken array are refused with a
+ * message; parameter names. */
+static int check_program_run(const StamBrdf *b, char *report, size_t report_len) {
+    enum { L = 2 };
+    const float x[7 * L] = {0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 1.0f, 550.0f,
+                            0.6f, 0.0f, 0.8f, -0.6f, 0.0f, 0.8f, 450.0f};
+    const float wi[3 * L] = {0.0f, 0.0f, 1.0f, 0.6f, 0.0f, 0.8f};
+    const float wo[3 * L] = {0.0f, 0.0f, 1.0f, -0.6f, 0.0f, 0.8f};
+    const float lambda[L] = {550.0f, 450.0f};
+    double x64[7 * L];
+    for (int i = 0; i < 7 * L; ++i) x64[i] = x[i];
+    float native[L], f[L], f_hooked[L], f_params[L];
+    double f64[L];
+    char err[256];
+    stam_brdf_eval_spectral(b, L, wi, wo, lambda, native);
+    const size_t n = stam_brdf_export_program(b, STAM_PROGRAM_EVAL_SPECTRAL, NULL, 0);
+    CHECK(57, n > 0, "no spectral eval program");
+    float *prog = malloc(n * sizeof(float));
+    CHECK(57, prog != NULL, "out of memory");
+    stam_brdf_export_program(b, STAM_PROGRAM_EVAL_SPECTRAL, prog, n);
+    struct hook_counts counts = {0, 0};
+    const int ran = stam_program_run(prog, n, x, L, NULL, 0, f, NULL, NULL, NULL, err, sizeof err);
+    const int ran_hooked = stam_program_run(prog, n, x, L, NULL, 0, f_hooked, count_elementary,
+                                            count_region, &counts, err, sizeof err);
+    const int ran64 = stam_program_run_f64(prog, n, x64, L, NULL, 0, f64, err, sizeof err);
+    /* The stored parameter values, given back (slots from the header). */
+    const size_t n_par = (size_t)prog[6], par_at = 8 + (size_t)prog[2] + 2 * (size_t)prog[4];
+    float params[STAM_PARAMS];
+    for (size_t k = 0; k < n_par && k < STAM_PARAMS; ++k) params[k] = prog[par_at + 2 * k + 1];
+    const int ran_params = n_par <= STAM_PARAMS &&
+                           stam_program_run(prog, n, x, L, params, n_par, f_params, NULL, NULL,
+                                            NULL, err, sizeof err);
+    const int wrong_count =
+        stam_program_run(prog, n, x, L, params, n_par + 1, f, NULL, NULL, NULL, err, sizeof err);
+    const int wrong_count_named = strstr(err, "n_param_values") != NULL;
+    prog[0] = 5.0f; /* another format */
+    const int broken = stam_program_run(prog, n, x, L, NULL, 0, f, NULL, NULL, NULL, err,
+                                        sizeof err);
+    free(prog);
+    CHECK(58, ran && ran_hooked && ran64 && ran_params, "stam_program_run failed: %s", err);
+    for (int i = 0; i < L; ++i) {
+        const float tol = 1e-3f * fabsf(native[i]) + 1e-6f;
+        CHECK(59, isfinite(f[i]) && fabsf(f[i] - native[i]) <= tol &&
+                      fabs(f64[i] - native[i]) <= tol,
+              "lane %d: program %g (f64 %g), eval_spectral %g", i, f[i], f64[i], native[i]);
+        CHECK(60, f_hooked[i] == f[i] && f_params[i] == f[i],
+              "lane %d: declining hooks or the stored parameters changed %g to %g / %g", i, f[i],
+              f_hooked[i], f_params[i]);
+    }
+    CHECK(61, counts.elementary > 0, "the elementary hook was never called");
+    CHECK(62, !wrong_count && wrong_count_named, "a wrong parameter count was accepted");
+    CHECK(63, !broken && err[0] != '\0', "a broken program array was run");
+    CHECK(64, stam_program_run(NULL, 0, x, L, NULL, 0, f, NULL, NULL, NULL, err, sizeof err) == 0 &&
+                  strstr(err, "NULL") != NULL,
+          "a NULL program was run");
+    CHECK(65, strcmp(stam_param_name(STAM_PARAM_PERIOD_UM), "period_um") == 0 &&
+                  strcmp(stam_param_name(STAM_PARAM_SIGMA_UM), "sigma_um") == 0 &&
+                  stam_param_name(STAM_PARAMS)[0] == '\0',
+          "parameter names");
+    return 0;
+}
+
 /* stam_brdf_coherent_probability of the material params_json at n lanes,
  * for the Rust side to compare with Brdf::coherent_probability. Returns 0,
  * or -1 when the material is refused. */
@@ -284,6 +368,13 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
 
     {
         int code = check_export_program(b, report, report_len);
+        if (code != 0) {
+            stam_brdf_free(b);
+            return code;
+        }
+    }
+    {
+        int code = check_program_run(b, report, report_len);
         if (code != 0) {
             stam_brdf_free(b);
             return code;

@@ -211,6 +211,18 @@ mod tests {
             h::stam_text_free as unsafe extern "C" fn(_),
             ffi::stam_text_free as unsafe extern "C" fn(_),
         );
+        same_signature(
+            h::stam_program_run as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _, _, _, _) -> _,
+            ffi::stam_program_run as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _, _, _, _) -> _,
+        );
+        same_signature(
+            h::stam_program_run_f64 as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _) -> _,
+            ffi::stam_program_run_f64 as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _) -> _,
+        );
+        same_signature(
+            h::stam_param_name as unsafe extern "C" fn(_) -> _,
+            ffi::stam_param_name as unsafe extern "C" fn(_) -> _,
+        );
         assert_eq!(h::STAM_FLAG_HAS_COHERENT, stam::material::FLAG_HAS_COHERENT);
         assert_eq!(h::STAM_FLAG_ANISOTROPIC, stam::material::FLAG_ANISOTROPIC);
         assert_eq!(
@@ -275,6 +287,75 @@ mod tests {
         }
         assert_eq!(h::STAM_PARAMS, stam::program::PARAM_COUNT);
         assert_eq!(h::STAM_PARAMS as usize, header.len());
+    }
+
+    /// The parameters' names (stam_param_name) are the core's, "" past the
+    /// last id.
+    #[test]
+    fn header_param_names_match_rust() {
+        use stam::program::ParamId as P;
+        use std::ffi::CStr;
+        for id in 0..stam::program::PARAM_COUNT {
+            let name = unsafe { CStr::from_ptr(ffi::stam_param_name(id)) };
+            assert_eq!(name.to_str().unwrap(), P::from_code(id).unwrap().name());
+        }
+        let none = unsafe { CStr::from_ptr(ffi::stam_param_name(stam::program::PARAM_COUNT)) };
+        assert!(none.to_bytes().is_empty());
+    }
+
+    /// The program array's format, header length and operation codes of the
+    /// header (STAM_PROGRAM_FORMAT, STAM_OP_*) are the core's, and STAM_OPS
+    /// is their number.
+    #[test]
+    fn header_program_layout_matches_rust() {
+        use c_header as h;
+        use stam::program::Op as O;
+        assert_eq!(h::STAM_PROGRAM_FORMAT, stam::program::FORMAT);
+        assert_eq!(
+            h::STAM_PROGRAM_HEADER_LEN as usize,
+            stam::program::HEADER_LEN
+        );
+        let header = [
+            (h::STAM_OP_INPUT, O::Input),
+            (h::STAM_OP_CONST, O::Const),
+            (h::STAM_OP_ADD, O::Add),
+            (h::STAM_OP_SUB, O::Sub),
+            (h::STAM_OP_MUL, O::Mul),
+            (h::STAM_OP_DIV, O::Div),
+            (h::STAM_OP_MIN, O::Min),
+            (h::STAM_OP_MAX, O::Max),
+            (h::STAM_OP_FMA, O::Fma),
+            (h::STAM_OP_NEG, O::Neg),
+            (h::STAM_OP_ABS, O::Abs),
+            (h::STAM_OP_SQRT, O::Sqrt),
+            (h::STAM_OP_EXP, O::Exp),
+            (h::STAM_OP_LOG, O::Log),
+            (h::STAM_OP_SIN, O::Sin),
+            (h::STAM_OP_COS, O::Cos),
+            (h::STAM_OP_ATAN2, O::Atan2),
+            (h::STAM_OP_FLOOR, O::Floor),
+            (h::STAM_OP_LT, O::Lt),
+            (h::STAM_OP_LE, O::Le),
+            (h::STAM_OP_GT, O::Gt),
+            (h::STAM_OP_GE, O::Ge),
+            (h::STAM_OP_EQ, O::Eq),
+            (h::STAM_OP_FINITE, O::Finite),
+            (h::STAM_OP_AND, O::And),
+            (h::STAM_OP_OR, O::Or),
+            (h::STAM_OP_NOT, O::Not),
+            (h::STAM_OP_SELECT, O::Select),
+            (h::STAM_OP_GATHER, O::Gather),
+            (h::STAM_OP_PARAM, O::Param),
+            (h::STAM_OP_IF, O::If),
+            (h::STAM_OP_END_IF, O::EndIf),
+        ];
+        for (code, op) in header {
+            assert_eq!(code, op as u32, "{op:?}");
+            assert_eq!(O::from_code(code), Some(op));
+        }
+        assert_eq!(h::STAM_OPS, stam::program::OP_COUNT);
+        assert_eq!(h::STAM_OPS as usize, header.len());
+        assert_eq!(O::from_code(h::STAM_OPS), None);
     }
 
     /// The luminance weights the header gives renderers (bindgen turns the

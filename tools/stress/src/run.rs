@@ -855,7 +855,12 @@ fn check_programs(
             );
         }
         match programs::decode_checked(kind, &array) {
-            Ok(p) => decoded.push(Some(p)),
+            Ok(p) => {
+                for v in check_program_run(&array, &p, kind, lanes) {
+                    fail(report, format!("{name}: {v}"));
+                }
+                decoded.push(Some(p))
+            }
             Err(e) => {
                 fail(report, e);
                 decoded.push(None);
@@ -876,6 +881,86 @@ fn check_programs(
     for v in checked.violations {
         fail(report, v);
     }
+}
+
+/// The core's executor through the ABI (stam_program_run, in f32 and f64)
+/// on the lanes, equal bit for bit to the Rust API's lane-by-lane run (the
+/// two schedules of one executor), and the program's parameter names
+/// (stam_param_name) the Rust API's. Returns the differences found.
+pub fn check_program_run(
+    array: &[f32],
+    p: &stam::program::Program,
+    kind: u32,
+    lanes: &[programs::Lane],
+) -> Vec<String> {
+    let mut found = Vec::new();
+    let n_out = p.outputs.len();
+    let x: Vec<f32> = lanes.iter().flat_map(|l| l.inputs(kind)).collect();
+    let x64: Vec<f64> = x.iter().map(|&v| v as f64).collect();
+    let mut out = vec![0.0f32; lanes.len() * n_out];
+    let mut out64 = vec![0.0f64; lanes.len() * n_out];
+    let mut err = [0 as std::ffi::c_char; 256];
+    let null = std::ptr::null_mut();
+    let ran = unsafe {
+        ffi::stam_program_run(
+            array.as_ptr(),
+            array.len(),
+            x.as_ptr(),
+            lanes.len(),
+            std::ptr::null(),
+            0,
+            out.as_mut_ptr(),
+            None,
+            None,
+            null,
+            err.as_mut_ptr(),
+            err.len(),
+        ) == 1
+            && ffi::stam_program_run_f64(
+                array.as_ptr(),
+                array.len(),
+                x64.as_ptr(),
+                lanes.len(),
+                std::ptr::null(),
+                0,
+                out64.as_mut_ptr(),
+                err.as_mut_ptr(),
+                err.len(),
+            ) == 1
+    };
+    if !ran {
+        let message = unsafe { std::ffi::CStr::from_ptr(err.as_ptr()) };
+        found.push(format!("stam_program_run refused it: {message:?}"));
+        return found;
+    }
+    for (i, lane) in lanes.iter().enumerate() {
+        let inputs = lane.inputs(kind);
+        let one = p.run::<f32>(&inputs);
+        let one64 = p.run::<f64>(&inputs.iter().map(|&v| v as f64).collect::<Vec<_>>());
+        let batch = &out[i * n_out..(i + 1) * n_out];
+        let batch64 = &out64[i * n_out..(i + 1) * n_out];
+        let same = one
+            .iter()
+            .zip(batch)
+            .all(|(a, b)| a.to_bits() == b.to_bits())
+            && one64
+                .iter()
+                .zip(batch64)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        if !same {
+            found.push(format!(
+                "stam_program_run at lane {lane:?}: {batch:?} (f64 {batch64:?}), the lane-by-lane run {one:?} (f64 {one64:?})"
+            ));
+            break;
+        }
+    }
+    for &(id, _) in &p.params {
+        let name = unsafe { std::ffi::CStr::from_ptr(ffi::stam_param_name(id as u32)) };
+        if name.to_str() != Ok(id.name()) {
+            found.push(format!("stam_param_name({id:?}) is {name:?}"));
+        }
+    }
+    found
 }
 
 fn check_sample(

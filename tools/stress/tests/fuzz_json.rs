@@ -285,7 +285,51 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
                     "stam_brdf_export_program {kind}: {written} of {len} floats"
                 ));
             }
-            decoded.push(Some(programs::decode_checked(kind, &array)?));
+            let program = programs::decode_checked(kind, &array)?;
+            // The ABI's executor equals the lane-by-lane one on these lanes.
+            if let Some(v) = stress::run::check_program_run(&array, &program, kind, &lanes).first()
+            {
+                return Err(format!("program {kind}: {v}"));
+            }
+            decoded.push(Some(program));
+        }
+        // The executor refuses what is not a program: NULL, and these
+        // floats as an array; a parameter id past the last has no name.
+        let mut err = [0 as c_char; 64];
+        let (null, none) = (std::ptr::null(), std::ptr::null_mut());
+        let mut out = [0.0f32; 4];
+        let mut out64 = [0.0f64; 4];
+        let as_array = [wi.as_slice(), wo.as_slice(), rnd.as_slice()].concat();
+        if stam_program_run(
+            null,
+            0,
+            null,
+            1,
+            null,
+            0,
+            out.as_mut_ptr(),
+            None,
+            None,
+            none,
+            err.as_mut_ptr(),
+            err.len(),
+        ) != 0
+            || stam_program_run_f64(
+                as_array.as_ptr(),
+                as_array.len(),
+                std::ptr::null(),
+                0,
+                std::ptr::null(),
+                0,
+                out64.as_mut_ptr(),
+                err.as_mut_ptr(),
+                err.len(),
+            ) != 0
+            || *stam_param_name(stam::program::PARAM_COUNT) != 0
+        {
+            return Err(
+                "stam_program_run ran no program, or an unknown parameter id has a name".into(),
+            );
         }
         for kind in [programs::KINDS, u32::MAX] {
             if stam_brdf_export_program(p, kind, std::ptr::null_mut(), 0) != 0 {

@@ -5,6 +5,13 @@
 //! into C. On a caught panic, outputs are zeroed (and construction reports
 //! the panic message).
 
+mod program;
+
+pub use program::{
+    stam_param_name, stam_program_run, stam_program_run_f64, StamProgramElementary,
+    StamProgramRegion,
+};
+
 use crate::material::params::{parameter_reference, resolved_json_text};
 use crate::material::plausibility::warnings_for_json;
 use crate::material::Brdf;
