@@ -17,6 +17,8 @@
 #                 (scripts/render_guide.py, about a minute on two cores)
 #   make wheel    the pip-installable package stam-diffraction: dist/*.whl
 #                 (pyproject.toml; its CMakeLists.txt runs `make plugin`)
+#   make check    the contributors' inner loop (lint, the fast Rust and Python
+#                 tests; at most 3 minutes warm); `make test` runs everything
 # Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
 # override to link a different build of the core).
 
@@ -29,6 +31,7 @@ STAM_LIB_DEFAULT := target/release/libstam.a
 STAM_LIB  ?= $(STAM_LIB_DEFAULT)
 STAM_H    := rust-core/include/stam.h
 PLUGIN_SO := $(BUILD)/plugins/diffraction.so
+PLUGIN_OBJ := $(BUILD)/plugins/diffraction.o
 PLUGIN_SRC := mitsuba-plugin/diffraction.cpp
 PLUGIN_HDR := mitsuba-plugin/batch.h mitsuba-plugin/code_version.h mitsuba-plugin/params_json.h mitsuba-plugin/program.h \
               mitsuba-plugin/jit_path.h mitsuba-plugin/plugin_params.h mitsuba-plugin/shape_kind.h \
@@ -60,7 +63,7 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo animation compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint bench bench-render stress furnace FORCE
+.PHONY: all demo animation compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress furnace FORCE
 all: plugin
 
 demo: setup plugin
@@ -98,9 +101,14 @@ else
 plugin: $(PLUGIN_SO)
 endif
 
-$(PLUGIN_SO): $(PLUGIN_SRC) $(PLUGIN_HDR) $(STAM_H) $(STAM_LIB) $(PLUGIN_ABI)
+# Compiled and linked apart: a change of the core alone relinks (seconds)
+# instead of compiling the plugin again (a minute).
+$(PLUGIN_OBJ): $(PLUGIN_SRC) $(PLUGIN_HDR) $(STAM_H) $(PLUGIN_ABI)
 	@mkdir -p $(dir $@)
-	$(CXX) $(PLUGIN_CXXFLAGS) $(PLUGIN_SRC) -o $@ $(PLUGIN_LDFLAGS) $(PLUGIN_LIBS)
+	$(CXX) $(PLUGIN_CXXFLAGS) -c $(PLUGIN_SRC) -o $@
+
+$(PLUGIN_SO): $(PLUGIN_OBJ) $(STAM_LIB)
+	$(CXX) $(PLUGIN_OBJ) -o $@ $(PLUGIN_LDFLAGS) $(PLUGIN_LIBS)
 
 # Rewritten only when $(PYTHON)'s versions differ from the recorded ones, which
 # rebuilds the plugin against their headers.
@@ -111,7 +119,7 @@ $(PLUGIN_ABI): FORCE
 	@if cmp -s $@.new $@; then rm $@.new; else mv $@.new $@; fi
 
 clean-plugin:
-	rm -f $(PLUGIN_SO) $(PLUGIN_ABI)
+	rm -f $(PLUGIN_SO) $(PLUGIN_OBJ) $(PLUGIN_ABI)
 
 # Built with the venv's packages (no build isolation: the pinned mitsuba, drjit,
 # nanobind, scikit-build-core and cmake of scripts/requirements.txt); `pip install .`
@@ -139,6 +147,25 @@ test-python: plugin render-tool
 
 # Everything, in the order that fails fastest.
 test: setup lint test-rust test-python
+
+# The contributors' inner loop (at most 3 minutes warm on 2 cores): lint, the
+# core's unit tests but the slowest (RUST_SLOW_TESTS, each over 2.5 s;
+# `cargo test` skips every test whose name contains one), the ABI's contract
+# with stam.h, and the Python tests of one variant without the slow ones
+# (`pytest --quick`, tests/conftest.py). `make test` runs everything.
+RUST_SLOW_TESTS := sampling_programs_pass_chi_square covered_disc_reflects_its_cover \
+	a_nearby_material_exports_the_same_code parameters_follow_the_changed_material \
+	sampling_variance_against each_order_reflects_the_solvers_efficiency \
+	a_differentiated_period_plans_for_its_interval chi2_sampling_programs \
+	energy_derivatives_follow_rebuilt_tables order_zero_grid_and_table_against_the_solver \
+	texture_sampling_passes_chi_square at_built_rgb_eval_equals_the_plain_one \
+	gaussian_rgb_table_is_lazy chi_square_detects_a_wrong_pdf \
+	sigma_texture_programs_serve_every_sigma conserving_is_reciprocal pdf_positive_where_brdf_is \
+	program_sizes conserving_rgb_matches_native efficiencies_are_reciprocal
+check: lint plugin
+	$(CARGO) test -p stam-core --lib --test stress_regressions -- $(addprefix --skip ,$(RUST_SLOW_TESTS))
+	$(CARGO) test -p stam-abi-check
+	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder --quick tests
 
 # ns per evaluation (docs/performance.md) and run time against error of every
 # accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
