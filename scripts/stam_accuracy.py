@@ -1,5 +1,5 @@
 """stam_accuracy: how the JIT path's values are compared with the core's
-(tests/test_jit.py, scripts/gpu_check.py; docs/jit.md, "Accuracy").
+(tests/test_jit.py, scripts/gpu_check.py; docs/jit_measured.md, "Accuracy").
 
     import stam_accuracy as acc
     err = acc.relative_errors(got, ref)                 # spectral: (.., n)

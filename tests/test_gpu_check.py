@@ -1,7 +1,7 @@
 """scripts/gpu_check.py, the CUDA checks of the JIT path, as far as a machine
 without a GPU can run them: its options, its exit where no CUDA device is,
 and its freeze check on the CPU (--variant llvm_ad_*, the script's dry run).
-The CUDA figures themselves are in docs/jit.md ("CUDA")."""
+The CUDA figures themselves are in docs/jit_measured.md ("CUDA")."""
 
 import os
 import subprocess

@@ -375,7 +375,7 @@ def test_gratings_at_doubly_grazing_pairs(variant, surface):
     table is read at its top node and c_n -> 0 for n != 0. Read from the
     table's other end, one f32 ulp of the position was 4e-4 of the cell's
     fraction there, and the sine gratings erred by up to 1.9e-3 at such
-    pairs (docs/jit.md, "CUDA"; the core's test:
+    pairs (docs/jit_measured.md, "CUDA"; the core's test:
     spectral_kernel_at_doubly_grazing_pairs)."""
     wi, wo = doubly_grazing_pairs(8000, seed=13)
     assert_eval_equals_the_core(variant, surface, wi, wo, lobes_seen=10,

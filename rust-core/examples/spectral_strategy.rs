@@ -1,5 +1,5 @@
 //! Spectral variants' sampling of the Gaussian surfaces: what the strategy's
-//! wavelength costs in variance (docs/jit.md, "Render time").
+//! wavelength costs in variance (docs/jit_measured.md, "Render time").
 //!
 //!   cargo run --release -p stam-core --example spectral_strategy [samples]
 //!

@@ -534,7 +534,7 @@ impl Gaussian {
     /// anything, so the twin stays. Where it cannot, the programs leave it
     /// out, sample and pdf alike (for the rough benchmark surface in
     /// llvm_ad_spectral it cost 0.35x of roughconductor's render time,
-    /// docs/jit.md "Render time").
+    /// docs/jit_measured.md "Render time").
     fn twin_matters(&self) -> bool {
         let kf = wavenumber_per_um(LAMBDA_MAX_NM) * self.surface.sigma_um;
         self.sigma_um_max.is_some() || TWIN_SHARE * (-(kf * kf)).exp() >= TWIN_NEGLIGIBLE

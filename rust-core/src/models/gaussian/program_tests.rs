@@ -630,7 +630,7 @@ fn holds(p: &Program, op: crate::program::Op) -> bool {
 /// and a rough surface leaves out the horizon twin (no atan2 in its pdf);
 /// a sigma texture keeps the steps and the twin (sigma varies per point).
 /// Each of these made the spectral Gaussians' renders 10-20% faster
-/// (docs/jit.md, "Render time"); this keeps them from being lost quietly.
+/// (docs/jit_measured.md, "Render time"); this keeps them from being lost quietly.
 #[test]
 fn spectral_strategies_read_their_fits_from_the_table() {
     use crate::program::Op;
