@@ -1145,10 +1145,9 @@ private:
     // Changes of the programs, shown to dr.freeze (code_version.h)
     diffraction_detail::CodeVersion<Float> m_code_version;
     /// An update moving a parameter the programs read by at most this
-    /// (relative) keeps the programs (update_without_rebuild): their error
-    /// against the rebuilt material stays below 1e-4, 1.1e-3 for the RGB
-    /// table of isotropic metals (docs/jit.md, "Parameters")
-    static constexpr ScalarFloat MaxDriftWithoutRebuild = 0.02f;
+    /// (relative) keeps the programs (update_without_rebuild): the core's
+    /// bound, within which they follow the rebuilt material (stam.h)
+    static constexpr ScalarFloat MaxDriftWithoutRebuild = (ScalarFloat) STAM_PROGRAM_MAX_DRIFT;
 
     MI_TRAVERSE_CB_WITH_VERSION(Base, m_code_version, m_tables, m_param_array.array(),
                                 m_twist_diff)

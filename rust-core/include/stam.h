@@ -187,6 +187,12 @@ size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
 #define STAM_PARAM_K 12u
 #define STAM_PARAMS 13u
 
+/* How far (relative) a renderer may move a parameter a program reads
+ * before it builds the material anew: within this the programs stay within
+ * 1e-4 of the changed material's (1.1e-3 for the Gaussian RGB table of
+ * isotropic metals); beyond it their tables and planned orders may not. */
+#define STAM_PROGRAM_MAX_DRIFT 0.02
+
 /* The name of parameter id `id` (the material's JSON key, e.g. "period_um"
  * for STAM_PARAM_PERIOD_UM); "" for an unknown id. A static string. */
 const char *stam_param_name(uint32_t id);

@@ -91,6 +91,13 @@ pub enum Op {
     EndIf = 31,
 }
 
+/// How far (relative) a renderer may move a parameter a program reads
+/// (`Op::Param`) before it rebuilds the material: within this the programs
+/// stay within 1e-4 of the changed material's (1.1e-3 for the Gaussian RGB
+/// table of isotropic metals), which `testing::params::check` asserts at
+/// plus and minus this change. `STAM_PROGRAM_MAX_DRIFT` of stam.h.
+pub const MAX_PARAM_DRIFT: f64 = 0.02;
+
 /// The number of operations (codes 0 .. OP_COUNT - 1).
 pub const OP_COUNT: u32 = 32;
 

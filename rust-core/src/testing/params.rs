@@ -371,7 +371,8 @@ pub fn check(
                 failures.push(format!("{} {kind:?}: does not read {id:?}", case.name));
                 continue;
             }
-            for factor in [0.98, 0.995, 1.005, 1.02] {
+            let drift = crate::program::MAX_PARAM_DRIFT;
+            for factor in [1.0 - drift, 0.995, 1.005, 1.0 + drift] {
                 let (vs_native, vs_program, checked) = changed(case, kind, id, factor, &ls);
                 println!(
                     "{:>22} {kind:?} {id:?} x{factor}: {checked} checked, max rel vs native {vs_native:.2e}, vs the changed material's program {vs_program:.2e}",

@@ -311,6 +311,7 @@ mod tests {
         use c_header as h;
         use stam::program::Op as O;
         assert_eq!(h::STAM_PROGRAM_FORMAT, stam::program::FORMAT);
+        assert_eq!(h::STAM_PROGRAM_MAX_DRIFT, stam::program::MAX_PARAM_DRIFT);
         assert_eq!(
             h::STAM_PROGRAM_HEADER_LEN as usize,
             stam::program::HEADER_LEN
