@@ -328,7 +328,6 @@ using diffraction_detail::ParamError;
 using diffraction_detail::parse_profile_heights;
 using diffraction_detail::run_batch;
 using diffraction_detail::Scratch;
-using diffraction_detail::with_plugin_keys;
 
 template <typename Float, typename Spectrum>
 class Diffraction final : public BSDF<Float, Spectrum> {
@@ -343,11 +342,10 @@ public:
     using Jit = JitPath<Float, Spectrum>;
     using FloatStorage = typename Jit::FloatStorage;
 
-    /// The plugin's own keys, which the core does not know (for messages).
-    static const std::vector<std::string> &plugin_keys() {
-        static const std::vector<std::string> keys = { "eta",      "k",        "twist",
-                                                       "tracks",   "center_u", "center_v" };
-        return keys;
+    /// The plugin's own keys, which the core does not know, as a JSON array
+    /// (the core lists them in an unknown key's message: stam_brdf_new_for_host).
+    static const char *plugin_keys_json() {
+        return R"(["eta", "k", "twist", "tracks", "center_u", "center_v"])";
     }
 
     Diffraction(const Properties &props) : Base(props) {
@@ -750,15 +748,14 @@ private:
     }
 
     /// A core material from the current parameters; throws ParamError with
-    /// the core's message (completed with the plugin's keys) when refused.
+    /// the core's message (which lists the plugin's keys too) when refused.
     Core build_core() const {
         Core c;
         c.json = build_json(m_params, m_gradients);
         char err[4096] = { 0 };
-        c.ptr.reset(stam_brdf_new(c.json.c_str(), err, sizeof(err)));
+        c.ptr.reset(stam_brdf_new_for_host(c.json.c_str(), plugin_keys_json(), err, sizeof(err)));
         if (!c.ptr)
-            throw ParamError(with_plugin_keys(
-                err[0] ? err : "the core refused the parameters", plugin_keys()));
+            throw ParamError(err[0] ? err : "the core refused the parameters");
         c.flags = stam_brdf_flags(c.ptr.get());
         c.warnings = stam_brdf_warnings(c.ptr.get());
         if constexpr (dr::is_jit_v<Float>)

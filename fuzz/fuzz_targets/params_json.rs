@@ -29,6 +29,13 @@ fuzz_target!(|data: &[u8]| {
         .collect();
     let mut err = vec![0 as c_char; 256];
     let p = unsafe { stam_brdf_new(c.as_ptr(), err.as_mut_ptr(), err.len()) };
+    // A host's own keys change no verdict; the fuzzed text as a host key list
+    // is refused or read, never a crash.
+    let mut host_err = vec![0 as c_char; 256];
+    let q = unsafe { stam_brdf_new_for_host(c.as_ptr(), c"[\"twist\"]".as_ptr(), host_err.as_mut_ptr(), host_err.len()) };
+    assert!(p.is_null() == q.is_null(), "stam_brdf_new_for_host decided otherwise");
+    unsafe { stam_brdf_free(q) };
+    unsafe { stam_brdf_free(stam_brdf_new_for_host(c"{}".as_ptr(), c.as_ptr(), host_err.as_mut_ptr(), host_err.len())) };
     if p.is_null() {
         let len = err.iter().position(|&c| c == 0).expect("message is NUL-terminated");
         assert!(len > 0, "refusal without a message");

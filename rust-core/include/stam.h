@@ -26,6 +26,14 @@ typedef struct StamBrdf StamBrdf;
  * on error and writes a NUL-terminated message naming the bad key and its
  * accepted range into err (truncated to err_len bytes; err may be NULL). */
 StamBrdf *stam_brdf_new(const char *params_json, char *err, size_t err_len);
+/* stam_brdf_new for a host that reads keys of its own before the core sees
+ * the JSON (a renderer's frame parameters, say): host_keys_json is a JSON
+ * array of them (NULL: none). An unknown key's message then lists them among
+ * the accepted keys and may suggest one ("did you mean 'twist'?"), so the
+ * host need not parse the message. A host_keys_json that is not an array of
+ * strings is refused. */
+StamBrdf *stam_brdf_new_for_host(const char *params_json, const char *host_keys_json,
+                                 char *err, size_t err_len);
 
 /* Free a material (NULL is ignored). */
 void stam_brdf_free(StamBrdf *brdf);

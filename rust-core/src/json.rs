@@ -2,7 +2,7 @@
 //! and its accepted range. Knows no surface model: each model's `params`
 //! module says which keys it reads.
 
-use crate::error::StamError;
+use crate::error::{StamError, UnknownKey};
 use serde_json::{json, Map, Value};
 
 /// The keys of one surface's parameters.
@@ -223,13 +223,12 @@ impl<'a> Reader<'a> {
     pub fn check_keys(&self, allowed: &[&str]) -> Result<(), StamError> {
         for key in self.obj.keys() {
             if !self.material_keys.contains(&key.as_str()) && !allowed.contains(&key.as_str()) {
-                let mut accepted: Vec<&str> = self.material_keys.to_vec();
-                accepted.extend_from_slice(allowed);
-                return Err(StamError::new(format!(
-                    "unknown parameter '{key}' for surface '{}' (accepted: {})",
-                    self.surface,
-                    accepted.join(", ")
-                )));
+                let accepted = self.material_keys.iter().chain(allowed);
+                return Err(StamError::unknown_key(UnknownKey {
+                    key: key.clone(),
+                    surface: self.surface.to_string(),
+                    accepted: accepted.map(|k| k.to_string()).collect(),
+                }));
             }
         }
         Ok(())

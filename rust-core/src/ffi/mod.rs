@@ -81,6 +81,48 @@ pub unsafe extern "C" fn stam_brdf_new(
     err: *mut c_char,
     err_len: usize,
 ) -> *mut StamBrdf {
+    new_material(params_json, &[], err, err_len)
+}
+
+/// # Safety
+/// As `stam_brdf_new`; `host_keys_json` NULL or a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_new_for_host(
+    params_json: *const c_char,
+    host_keys_json: *const c_char,
+    err: *mut c_char,
+    err_len: usize,
+) -> *mut StamBrdf {
+    let host_keys = if host_keys_json.is_null() {
+        Vec::new()
+    } else {
+        let keys = CStr::from_ptr(host_keys_json)
+            .to_str()
+            .ok()
+            .and_then(|t| serde_json::from_str::<Vec<String>>(t).ok());
+        match keys {
+            Some(keys) => keys,
+            None => {
+                write_message(
+                    err,
+                    err_len,
+                    "host_keys_json is not a JSON array of strings (the host's own keys)",
+                );
+                return std::ptr::null_mut();
+            }
+        }
+    };
+    new_material(params_json, &host_keys, err, err_len)
+}
+
+/// The material of `params_json`, or NULL with the reason in `err` (an
+/// unknown key's message listing `host_keys` too).
+unsafe fn new_material(
+    params_json: *const c_char,
+    host_keys: &[String],
+    err: *mut c_char,
+    err_len: usize,
+) -> *mut StamBrdf {
     if params_json.is_null() {
         write_message(err, err_len, "params_json is NULL");
         return std::ptr::null_mut();
@@ -105,7 +147,7 @@ pub unsafe extern "C" fn stam_brdf_new(
             }))
         }
         Ok(Err(e)) => {
-            write_message(err, err_len, &e.message);
+            write_message(err, err_len, &e.with_host_keys(host_keys).message);
             std::ptr::null_mut()
         }
         Err(payload) => {

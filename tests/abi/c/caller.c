@@ -284,6 +284,20 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     CHECK(1, bad == NULL, "invalid parameters were accepted");
     CHECK(2, strstr(err, "sigma_um") != NULL, "error message does not name the key: %s", err);
     CHECK(3, stam_brdf_new(NULL, err, sizeof err) == NULL, "NULL json accepted");
+    /* A host's own keys join an unknown key's message, with a suggestion;
+     * a host key list that is not an array of strings is refused. */
+    CHECK(66, stam_brdf_new_for_host("{\"surface\":\"cd\",\"twistt\":1}", "[\"twist\"]", err,
+                                     sizeof err) == NULL &&
+                  strstr(err, "twist)") != NULL && strstr(err, "did you mean 'twist'?") != NULL,
+          "host keys in the message: %s", err);
+    CHECK(67, stam_brdf_new_for_host("{\"surface\":\"cd\"}", "{}", err, sizeof err) == NULL &&
+                  strstr(err, "host_keys_json") != NULL,
+          "a bad host key list accepted: %s", err);
+    {
+        StamBrdf *h = stam_brdf_new_for_host("{\"surface\":\"cd\"}", NULL, err, sizeof err);
+        CHECK(68, h != NULL, "stam_brdf_new_for_host without host keys: %s", err);
+        stam_brdf_free(h);
+    }
     /* A tiny error buffer must be truncated, NUL-terminated. */
     char tiny[4] = {'x', 'x', 'x', 'x'};
     CHECK(4, stam_brdf_new("{}", tiny, sizeof tiny) == NULL && tiny[3] == '\0', "truncation");

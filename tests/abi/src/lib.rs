@@ -220,6 +220,10 @@ mod tests {
             ffi::stam_program_run_f64 as unsafe extern "C" fn(_, _, _, _, _, _, _, _, _) -> _,
         );
         same_signature(
+            h::stam_brdf_new_for_host as unsafe extern "C" fn(_, _, _, _) -> _,
+            ffi::stam_brdf_new_for_host as unsafe extern "C" fn(_, _, _, _) -> _,
+        );
+        same_signature(
             h::stam_param_name as unsafe extern "C" fn(_) -> _,
             ffi::stam_param_name as unsafe extern "C" fn(_) -> _,
         );

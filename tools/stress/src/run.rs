@@ -281,6 +281,18 @@ fn build(json: &str) -> Result<Material, String> {
     let c = CString::new(json).map_err(|e| e.to_string())?;
     let mut err = vec![0 as c_char; 512];
     let p = unsafe { ffi::stam_brdf_new(c.as_ptr(), err.as_mut_ptr(), err.len()) };
+    // A host's own keys change no verdict, only an unknown key's message.
+    let hosts = c"[\"twist\", \"tracks\"]";
+    let mut host_err = vec![0 as c_char; 512];
+    let q = unsafe {
+        ffi::stam_brdf_new_for_host(c.as_ptr(), hosts.as_ptr(), host_err.as_mut_ptr(), 512)
+    };
+    if p.is_null() != q.is_null() {
+        return Err(format!(
+            "stam_brdf_new_for_host decided otherwise than stam_brdf_new for {json}"
+        ));
+    }
+    unsafe { ffi::stam_brdf_free(q) };
     if p.is_null() {
         let bytes: Vec<u8> = err
             .iter()

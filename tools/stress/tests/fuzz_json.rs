@@ -63,6 +63,26 @@ fn exercise(text: &str, floats: &[f32]) -> Result<(), String> {
     let c = CString::new(text).unwrap();
     let mut err = vec![0x55 as c_char; 256];
     let p = unsafe { stam::ffi::stam_brdf_new(c.as_ptr(), err.as_mut_ptr(), err.len()) };
+    // A host's own keys change no verdict; its key list is the same text.
+    let mut host_err = vec![0 as c_char; 256];
+    let q = unsafe {
+        stam::ffi::stam_brdf_new_for_host(
+            c.as_ptr(),
+            c"[\"twist\"]".as_ptr(),
+            host_err.as_mut_ptr(),
+            256,
+        )
+    };
+    let bad_hosts = unsafe {
+        stam::ffi::stam_brdf_new_for_host(c"{}".as_ptr(), c.as_ptr(), host_err.as_mut_ptr(), 256)
+    };
+    unsafe { stam::ffi::stam_brdf_free(bad_hosts) };
+    if p.is_null() != q.is_null() {
+        return Err(format!(
+            "stam_brdf_new_for_host decided otherwise for {text:?}"
+        ));
+    }
+    unsafe { stam::ffi::stam_brdf_free(q) };
     if p.is_null() {
         REFUSED.fetch_add(1, Ordering::Relaxed);
         let end = err
