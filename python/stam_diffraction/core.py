@@ -547,7 +547,7 @@ def decode_program(array):
     # No lanes: the core only checks the array.
     if not lib().stam_program_run(_ptr(v), len(v), None, 0, None, 0, None, _ELEMENTARY(),
                                   _REGION(), None, err, len(err)):
-        raise ValueError('stam_diffraction.core: not a program array: %s' % err.value.decode())
+        raise ValueError('stam_diffraction.core: %s' % err.value.decode())
     n_inputs, n_out, n_code, n_tab, _, n_par = (int(x) for x in v[1:7])
     directory = PROGRAM_HEADER_LEN + n_out
     par_at = directory + 2 * n_tab

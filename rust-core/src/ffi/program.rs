@@ -4,7 +4,7 @@
 //! executor is `Program::run_batch`.
 
 use super::write_message;
-use crate::program::{decode, BatchHooks, Lane, Op, ParamId, Program, FORMAT, HEADER_LEN};
+use crate::program::{decode_checked, BatchHooks, Lane, Op, ParamId, Program, FORMAT};
 use std::ffi::{c_char, c_void};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -82,12 +82,9 @@ unsafe fn prepare<T: Lane>(
         return Err("program is NULL".into());
     }
     let array = std::slice::from_raw_parts(program, program_len);
-    let Some(p) = decode(array) else {
-        return Err(format!(
-            "not a program of format {FORMAT} (stam_brdf_export_program's array), or its layout is broken: header {:?}",
-            &array[..array.len().min(HEADER_LEN)]
-        ));
-    };
+    let p = decode_checked(array).map_err(|why| {
+        format!("not a program array of format {FORMAT} (stam_brdf_export_program's): {why}")
+    })?;
     let params = if param_values.is_null() {
         p.params.iter().map(|&(_, v)| T::from_f32(v)).collect()
     } else if n_param_values != p.params.len() {

@@ -74,44 +74,72 @@ impl Program {
 /// naming the innermost open `If`, no Input, Const or Param inside one,
 /// every table inside the array, every parameter a known id (each at most
 /// once) with a finite value, every `Param` reading one of them. None for
-/// anything else.
+/// anything else (`decode_checked` says why).
 pub fn decode(v: &[f32]) -> Option<Program> {
-    let int = |x: f32| -> Option<u32> {
-        ((0.0..16_777_216.0).contains(&x) && x.fract() == 0.0).then_some(x as u32)
+    decode_checked(v).ok()
+}
+
+/// `decode`, with the first check an array fails.
+pub fn decode_checked(v: &[f32]) -> Result<Program, String> {
+    let int = |x: f32, what: &dyn Fn() -> String| -> Result<u32, String> {
+        ((0.0..16_777_216.0).contains(&x) && x.fract() == 0.0)
+            .then_some(x as u32)
+            .ok_or_else(|| format!("{} is {x}, not an integer below 2^24", what()))
     };
-    if v.len() < HEADER_LEN || int(v[0])? != FORMAT {
-        return None;
+    let fail = |m: String| -> Result<Program, String> { Err(m) };
+    if v.len() < HEADER_LEN {
+        return fail(format!("{} values, shorter than the header", v.len()));
     }
-    let n_inputs = int(v[1])?;
-    let n_out = int(v[2])? as usize;
-    let n_code = int(v[3])? as usize;
-    let n_tab = int(v[4])? as usize;
-    let total = int(v[5])? as usize;
-    let n_par = int(v[6])? as usize;
-    if total != v.len() || v[7] != 0.0 {
-        return None;
+    let format = int(v[0], &|| "the format".into())?;
+    if format != FORMAT {
+        return fail(format!("format {format}, not {FORMAT}"));
+    }
+    let n_inputs = int(v[1], &|| "the input count".into())?;
+    let n_out = int(v[2], &|| "the output count".into())? as usize;
+    let n_code = int(v[3], &|| "the instruction count".into())? as usize;
+    let n_tab = int(v[4], &|| "the table count".into())? as usize;
+    let total = int(v[5], &|| "the length".into())? as usize;
+    let n_par = int(v[6], &|| "the parameter count".into())? as usize;
+    if total != v.len() {
+        return fail(format!(
+            "the header says {total} values, the array has {}",
+            v.len()
+        ));
+    }
+    if v[7] != 0.0 {
+        return fail(format!("header value 7 is {}, not 0", v[7]));
     }
     let dir = HEADER_LEN + n_out;
     let par_at = dir + 2 * n_tab;
     let code_at = par_at + 2 * n_par;
     if code_at + 4 * n_code > total {
-        return None;
+        return fail(format!(
+            "{n_code} instructions, {n_tab} tables and {n_par} parameters do not fit in {total} values"
+        ));
     }
     let mut tables = Vec::with_capacity(n_tab);
     for t in 0..n_tab {
-        let off = int(v[dir + 2 * t])? as usize;
-        let len = int(v[dir + 2 * t + 1])? as usize;
+        let off = int(v[dir + 2 * t], &|| format!("table {t}'s offset"))? as usize;
+        let len = int(v[dir + 2 * t + 1], &|| format!("table {t}'s length"))? as usize;
         if off < code_at + 4 * n_code || off + len > total {
-            return None;
+            return fail(format!(
+                "table {t} at {off}..{} lies outside the tables' section",
+                off + len
+            ));
         }
         tables.push(v[off..off + len].to_vec());
     }
     let mut params: Vec<(ParamId, f32)> = Vec::with_capacity(n_par);
     for k in 0..n_par {
-        let id = ParamId::from_code(int(v[par_at + 2 * k])?)?;
+        let code = int(v[par_at + 2 * k], &|| format!("parameter {k}'s id"))?;
+        let id = ParamId::from_code(code)
+            .ok_or_else(|| format!("parameter {k} has the unknown id {code}"))?;
         let value = v[par_at + 2 * k + 1];
-        if !value.is_finite() || params.iter().any(|&(p, _)| p == id) {
-            return None;
+        if !value.is_finite() {
+            return fail(format!("parameter {k} ({}) is {value}", id.name()));
+        }
+        if params.iter().any(|&(p, _)| p == id) {
+            return fail(format!("parameter {k} ({}) is listed twice", id.name()));
         }
         params.push((id, value));
     }
@@ -121,25 +149,40 @@ pub fn decode(v: &[f32]) -> Option<Program> {
     let mut open: Vec<u32> = Vec::new();
     for i in 0..n_code {
         let w = &v[code_at + 4 * i..code_at + 4 * i + 4];
-        let op = Op::from_code(int(w[0])?)?;
+        let op_code = int(w[0], &|| format!("instruction {i}'s op code"))?;
+        let op = Op::from_code(op_code)
+            .ok_or_else(|| format!("instruction {i} has the unknown op code {op_code}"))?;
         let a = if op == Op::Const {
             w[1].to_bits()
         } else {
-            int(w[1])?
+            int(w[1], &|| format!("instruction {i}'s operand a"))?
         };
         let ins = Instr {
             op,
             a,
-            b: int(w[2])?,
-            c: int(w[3])?,
+            b: int(w[2], &|| format!("instruction {i}'s operand b"))?,
+            c: int(w[3], &|| format!("instruction {i}'s operand c"))?,
         };
+        let bad = |what: String| format!("instruction {i} ({op:?}) {what}");
         match op {
-            Op::Input if a >= n_inputs => return None,
-            Op::Gather if a as usize >= n_tab => return None,
-            Op::Param if a as usize >= n_par => return None,
-            Op::Input | Op::Const | Op::Param if !open.is_empty() => return None,
+            Op::Input if a >= n_inputs => {
+                return fail(bad(format!("reads input {a} of {n_inputs}")))
+            }
+            Op::Gather if a as usize >= n_tab => {
+                return fail(bad(format!("reads table {a} of {n_tab}")))
+            }
+            Op::Param if a as usize >= n_par => {
+                return fail(bad(format!("reads parameter slot {a} of {n_par}")))
+            }
+            Op::Input | Op::Const | Op::Param if !open.is_empty() => {
+                return fail(bad("lies inside a region".into()))
+            }
             Op::If => open.push(i as u32),
-            Op::EndIf if open.pop() != Some(a) => return None,
+            Op::EndIf if open.pop() != Some(a) => {
+                return fail(bad(format!(
+                    "ends the region of register {a}, which is not the innermost open one"
+                )))
+            }
             _ => {}
         }
         // Operand kinds: masks where the operation takes masks.
@@ -149,26 +192,42 @@ pub fn decode(v: &[f32]) -> Option<Program> {
             _ => false,
         };
         for (k, r) in operands(&ins).into_iter().enumerate() {
-            if r as usize >= i || is_mask[r as usize] != Some(wants_mask(k)) {
-                return None;
+            if r as usize >= i {
+                return fail(bad(format!(
+                    "reads register {r}, which is not defined before it"
+                )));
+            }
+            if is_mask[r as usize] != Some(wants_mask(k)) {
+                let kind = |m: Option<bool>| match m {
+                    Some(true) => "a mask",
+                    Some(false) => "a float",
+                    None => "a region's marker",
+                };
+                return fail(bad(format!(
+                    "reads register {r}, {}, where it takes {}",
+                    kind(is_mask[r as usize]),
+                    kind(Some(wants_mask(k)))
+                )));
             }
         }
         let _ = arity(op);
         is_mask.push((!op.is_marker()).then_some(op.gives_mask()));
         code.push(ins);
     }
-    if !open.is_empty() {
-        return None;
+    if let Some(r) = open.last() {
+        return fail(format!("the region of register {r} is not closed"));
     }
     let mut outputs = Vec::with_capacity(n_out);
     for k in 0..n_out {
-        let r = int(v[HEADER_LEN + k])?;
+        let r = int(v[HEADER_LEN + k], &|| format!("output {k}'s register"))?;
         if r as usize >= n_code || is_mask[r as usize] != Some(false) {
-            return None;
+            return fail(format!(
+                "output {k} is register {r}, not a float register of the code"
+            ));
         }
         outputs.push(r);
     }
-    Some(Program {
+    Ok(Program {
         n_inputs,
         code,
         outputs,

@@ -27,7 +27,7 @@ mod tests;
 
 pub use batch::{BatchHooks, NoHooks, BATCH_LANES};
 pub use builder::{Builder, Mask, Table, Value};
-pub use encode::{decode, FORMAT, HEADER_LEN};
+pub use encode::{decode, decode_checked, FORMAT, HEADER_LEN};
 pub use interpret::Lane;
 
 /// Operation codes (the plugin's executor mirrors them: program.h).

@@ -295,3 +295,23 @@ fn the_batch_schedule_takes_the_callers_elementary_functions() {
     }
     assert_eq!(hooks.elementary, 3);
 }
+
+#[test]
+fn a_refused_array_says_why() {
+    let p = regions();
+    let v = p.encode();
+    let code_at = HEADER_LEN + p.outputs.len() + 2 * p.tables.len() + 2 * p.params.len();
+    let why = |f: &dyn Fn(&mut Vec<f32>)| {
+        let mut w = v.clone();
+        f(&mut w);
+        super::decode_checked(&w).unwrap_err()
+    };
+    assert_eq!(why(&|w| w[0] = 3.0), "format 3, not 4");
+    assert!(why(&|w| w.truncate(5)).contains("shorter than the header"));
+    assert!(why(&|w| w[code_at] = 99.0).contains("instruction 0 has the unknown op code 99"));
+    let first_if = p.code.iter().position(|i| i.op == Op::If).unwrap();
+    // The If's mask: a float register (the input) where a mask goes.
+    assert!(why(&|w| w[code_at + 4 * first_if + 1] = 0.0)
+        .contains("reads register 0, a float, where it takes a mask"));
+    assert!(why(&|w| w[HEADER_LEN] = 1e6).contains("output 0 is register 1000000"));
+}
