@@ -81,6 +81,16 @@ def scene(mi, bsdf, size, spp):
     })
 
 
+def rendered(mi, s, spp, seed):
+    """A render with its kernels finished: in a JIT variant mi.render
+    returns once its kernels are queued (it waits for the previous
+    render's), so an unsynchronised time is that of whatever ran before."""
+    import drjit as dr
+    img = mi.render(s, spp=spp, seed=seed)
+    dr.eval(img)
+    dr.sync_thread()
+
+
 def time_renders(mi, materials, size, spp, repeats):
     """Fastest of `repeats` renders per material. The rounds are interleaved
     (every material once per round), so that a slow spell of the shared
@@ -96,9 +106,9 @@ def time_renders(mi, materials, size, spp, repeats):
     for r in range(repeats):
         for name, bsdf in materials.items():
             s = scene(mi, bsdf, size, spp)
-            mi.render(s, spp=spp, seed=0)
+            rendered(mi, s, spp, 0)
             t = time.perf_counter()
-            mi.render(s, spp=spp, seed=r + 1)
+            rendered(mi, s, spp, r + 1)
             best[name] = min(best[name], time.perf_counter() - t)
             del s
             gc.collect()
