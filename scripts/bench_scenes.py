@@ -31,16 +31,14 @@ import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import bench_render  # noqa: E402
 import stam_mitsuba  # noqa: E402
 
-SIGMA_UM, CORR_UM = 0.5, 4.0
-MATERIALS = {
-    'roughconductor': {'type': 'roughconductor', 'distribution': 'beckmann',
-                       'alpha': 2 * SIGMA_UM / CORR_UM, 'material': 'Al'},
-    'gaussian (rough)': {'type': 'diffraction', 'surface': 'gaussian',
-                         'sigma_um': SIGMA_UM, 'corr_um': CORR_UM},
-    'cd': {'type': 'diffraction', 'surface': 'cd'},
-}
+# bench_render's baseline and materials, under short names.
+MATERIALS = {short: bench_render.MATERIALS[name] for short, name in (
+    ('roughconductor', 'roughconductor (baseline)'),
+    ('gaussian (rough)', 'diffraction gaussian (rough)'),
+    ('cd', 'diffraction cd'))}
 JSON_TAG = '@@bench_scenes '
 
 
