@@ -35,11 +35,12 @@ impl UnknownKey {
             strsim::levenshtein(&self.key, c)
                 .min(strsim::levenshtein(&(self.key.clone() + "_um"), c))
         };
-        if let Some(best) = self
+        if let Some((_, best)) = self
             .accepted
             .iter()
-            .filter(|c| distance(c) <= 2)
-            .min_by_key(|c| distance(c))
+            .map(|c| (distance(c), c))
+            .filter(|&(d, _)| d <= 2)
+            .min_by_key(|&(d, _)| d)
         {
             m += &format!("; did you mean '{best}'?");
         }

@@ -39,6 +39,10 @@ struct CallerHooks {
 }
 
 impl BatchHooks<f32> for CallerHooks {
+    fn takes_elementary(&self) -> bool {
+        self.elementary.is_some()
+    }
+
     fn elementary(&mut self, op: Op, a: &[f32], b: &[f32], out: &mut [f32]) -> bool {
         let Some(f) = self.elementary else {
             return false;
@@ -153,11 +157,12 @@ unsafe fn run<T: Lane>(
     } else {
         std::slice::from_raw_parts(inputs, n_in_total)
     };
-    let mut out = vec![T::zero(); n_out_total];
-    p.run_batch(x, lanes, &params, hooks, &mut out);
-    if n_out_total > 0 {
-        std::ptr::copy_nonoverlapping(out.as_ptr(), outputs, n_out_total);
-    }
+    let out = if n_out_total == 0 {
+        &mut [][..]
+    } else {
+        std::slice::from_raw_parts_mut(outputs, n_out_total)
+    };
+    p.run_batch(x, lanes, &params, hooks, out);
     Ok(())
 }
 

@@ -17,6 +17,12 @@ pub const BATCH_LANES: usize = 16_384;
 
 /// What a caller may supply to `run_batch`.
 pub trait BatchHooks<T> {
+    /// Whether `elementary` may compute any operation (else the executor
+    /// hands it none, copying no operands).
+    fn takes_elementary(&self) -> bool {
+        false
+    }
+
     /// Computes the elementary function `op` (Exp, Log, Sin, Cos; Atan2 of
     /// (a, b)) of the lanes into `out`, or returns false to leave it to the
     /// executor. `b` is empty but for Atan2.
@@ -150,10 +156,7 @@ impl Program {
                     if !r.contains(&true) {
                         // As the lane-by-lane schedule skips it (with no
                         // EndIf: the rest of the program).
-                        skip_to = self.code[i + 1..]
-                            .iter()
-                            .position(|x| x.op == Op::EndIf && x.a == i as u32)
-                            .map_or(self.code.len(), |k| i + 1 + k + 1);
+                        skip_to = self.region_end(i);
                     } else {
                         runs.push(r);
                     }
@@ -164,18 +167,12 @@ impl Program {
                     Column::Uniform(T::zero())
                 }
                 Op::Input => Column::Lanes((0..n).map(|l| x[l * n_in + ins.a as usize]).collect()),
-                op @ (Op::Exp | Op::Log | Op::Sin | Op::Cos | Op::Atan2) => {
-                    // The caller's function where it has one: over the
-                    // lanes, or once for a uniform operand.
-                    let reads = operands(ins);
-                    let m = if reads
-                        .iter()
-                        .all(|&r| matches!(regs[r as usize], Column::Uniform(_)))
-                    {
-                        1
-                    } else {
-                        n
-                    };
+                op @ (Op::Exp | Op::Log | Op::Sin | Op::Cos | Op::Atan2)
+                    if hooks.takes_elementary() =>
+                {
+                    // The caller's function: over the lanes, or once for a
+                    // uniform operand.
+                    let m = if uniform(ins, &regs) { 1 } else { n };
                     let a = regs[ins.a as usize].lanes(m);
                     let b = if op == Op::Atan2 {
                         regs[ins.b as usize].lanes(m)
@@ -219,11 +216,7 @@ impl Program {
         regs: &[Column<T>],
     ) -> Column<T> {
         let n_in = self.n_inputs as usize;
-        let uniform = ins.op != Op::Input
-            && operands(ins)
-                .iter()
-                .all(|&r| matches!(regs[r as usize], Column::Uniform(_)));
-        if uniform {
+        if ins.op != Op::Input && uniform(ins, regs) {
             return Column::Uniform(self.apply(
                 ins,
                 |_| unreachable!("an input is per lane"),
@@ -244,4 +237,11 @@ impl Program {
                 .collect(),
         )
     }
+}
+
+/// Whether every register `ins` reads holds one value for all lanes.
+fn uniform<T>(ins: &super::Instr, regs: &[Column<T>]) -> bool {
+    operands(ins)
+        .iter()
+        .all(|&r| matches!(regs[r as usize], Column::Uniform(_)))
 }

@@ -118,11 +118,7 @@ impl Program {
             // them (a grating's programs skip most of their order regions
             // on most lanes); with no EndIf, the rest of the program.
             if ins.op == Op::If && !(regs[ins.a as usize] > T::zero()) {
-                let begin = i as u32;
-                let end = code[i + 1..]
-                    .iter()
-                    .position(|x| x.op == Op::EndIf && x.a == begin)
-                    .map_or(code.len(), |k| i + 1 + k + 1);
+                let end = self.region_end(i);
                 regs.resize(end, T::zero());
                 i = end;
                 continue;
@@ -134,6 +130,16 @@ impl Program {
         for (o, &r) in out.iter_mut().zip(&self.outputs) {
             *o = regs[r as usize];
         }
+    }
+
+    /// Where the region whose `If` is instruction `begin` ends: just past
+    /// its `EndIf`, or the program's end where it has none. A lane (or a
+    /// batch of lanes) that does not run the region resumes there.
+    pub(super) fn region_end(&self, begin: usize) -> usize {
+        self.code[begin + 1..]
+            .iter()
+            .position(|x| x.op == Op::EndIf && x.a == begin as u32)
+            .map_or(self.code.len(), |k| begin + 1 + k + 1)
     }
 
     /// One instruction's value on one lane: what every schedule of the

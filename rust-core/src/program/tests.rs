@@ -201,6 +201,10 @@ struct Recording {
 }
 
 impl super::BatchHooks<f32> for Recording {
+    fn takes_elementary(&self) -> bool {
+        true
+    }
+
     fn elementary(&mut self, op: Op, a: &[f32], _b: &[f32], out: &mut [f32]) -> bool {
         self.elementary += 1;
         if op != Op::Exp {
