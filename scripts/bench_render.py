@@ -81,17 +81,18 @@ def scene(mi, bsdf, size, spp):
     })
 
 
-def rendered(mi, s, spp, seed):
+def rendered(mi, s, seed, spp=0):
     """A render with its kernels finished: in a JIT variant mi.render
     returns once its kernels are queued (it waits for the previous
-    render's), so an unsynchronised time is that of whatever ran before."""
+    render's), so an unsynchronised time is that of whatever ran before.
+    spp 0: the scene's sampler's."""
     import drjit as dr
     img = mi.render(s, spp=spp, seed=seed)
     dr.eval(img)
     dr.sync_thread()
 
 
-def time_renders(mi, materials, size, spp, repeats):
+def time_renders(mi, materials, make_scene, repeats):
     """Fastest of `repeats` renders per material. The rounds are interleaved
     (every material once per round), so that a slow spell of the shared
     machine hits all of them alike instead of one material's renders.
@@ -101,14 +102,15 @@ def time_renders(mi, materials, size, spp, repeats):
     each kernel would carry every material's code (the baseline's too: it
     measured 3.6x slower that way). Each round builds the scene afresh and
     renders it once untimed (tables, tracing, the kernel from Dr.Jit's
-    cache), then times one render."""
+    cache), then times one render. make_scene(bsdf): the scene of a
+    material."""
     best = {name: float('inf') for name in materials}
     for r in range(repeats):
         for name, bsdf in materials.items():
-            s = scene(mi, bsdf, size, spp)
-            rendered(mi, s, spp, 0)
+            s = make_scene(bsdf)
+            rendered(mi, s, 0)
             t = time.perf_counter()
-            rendered(mi, s, spp, r + 1)
+            rendered(mi, s, r + 1)
             best[name] = min(best[name], time.perf_counter() - t)
             del s
             gc.collect()
@@ -125,7 +127,8 @@ def run_one(args):
         materials = {n: b for n, b in MATERIALS.items() if runs_in(variant, b)}
         print('[bench_render] %s: %d interleaved rounds of %d renders...'
               % (variant, args.repeats, len(materials)), flush=True)
-        best = time_renders(mi, materials, args.size, args.spp, args.repeats)
+        best = time_renders(mi, materials, lambda bsdf: scene(mi, bsdf, args.size, args.spp),
+                            args.repeats)
         base = best['roughconductor (baseline)']
         for name, t in best.items():
             rows.append((variant, name, t, t / base))

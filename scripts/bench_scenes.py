@@ -22,7 +22,6 @@ The diffraction materials are the rough Gaussian whose large-g limit is
 that roughconductor (alpha = 2 sigma / T), and the compact disc.
 """
 import argparse
-import gc
 import json
 import os
 import statistics
@@ -72,42 +71,15 @@ def cbox_scene(mi, bsdf):
     return mi.load_dict(d)
 
 
-def render(mi, scene, seed):
-    """A render, evaluated: a JIT variant's mi.render may return before its
-    kernel ran."""
-    import drjit as dr
-    img = mi.render(scene, seed=seed)
-    dr.eval(img)
-    dr.sync_thread()
-    return img
-
-
-def time_small(mi, repeats):
-    """Fastest of `repeats` warm renders of the small scene per material,
-    the materials interleaved (one scene alive at a time: a symbolic call
-    traces every registered BSDF)."""
-    best = {name: float('inf') for name in MATERIALS}
-    for r in range(repeats):
-        for name, bsdf in MATERIALS.items():
-            s = small_scene(mi, bsdf)
-            render(mi, s, 0)
-            t = time.perf_counter()
-            render(mi, s, r + 1)
-            best[name] = min(best[name], time.perf_counter() - t)
-            del s
-            gc.collect()
-    return best
-
-
 def time_cbox(mi, name):
     """(load, first render, second render) seconds of the Cornell box with
     one material, in this process (fresh: see `run_processes`)."""
     t0 = time.perf_counter()
     s = cbox_scene(mi, MATERIALS[name])
     t1 = time.perf_counter()
-    render(mi, s, 0)
+    bench_render.rendered(mi, s, 0)
     t2 = time.perf_counter()
-    render(mi, s, 1)
+    bench_render.rendered(mi, s, 1)
     t3 = time.perf_counter()
     return t1 - t0, t2 - t1, t3 - t2
 
@@ -115,7 +87,9 @@ def time_cbox(mi, name):
 def child(args):
     mi = stam_mitsuba.setup(args.variant)
     if args.scene == 'small':
-        out = time_small(mi, args.repeats)
+        # Warm kernels, the materials interleaved (bench_render's rounds)
+        out = bench_render.time_renders(mi, MATERIALS, lambda bsdf: small_scene(mi, bsdf),
+                                        args.repeats)
     else:
         out = time_cbox(mi, args.material)
     print(JSON_TAG + json.dumps(out), flush=True)

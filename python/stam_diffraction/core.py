@@ -256,10 +256,12 @@ def _f32(a):
 
 
 def _ptr(a):
-    """Pointer to a contiguous array's data, or NULL for None."""
+    """Pointer to a contiguous array's data (uint8, float32 or float64), or
+    NULL for None."""
     if a is None:
         return None
-    ctype = ctypes.c_uint8 if a.dtype == np.uint8 else ctypes.c_float
+    ctype = {np.dtype(np.uint8): ctypes.c_uint8,
+             np.dtype(np.float64): ctypes.c_double}.get(a.dtype, ctypes.c_float)
     return a.ctypes.data_as(ctypes.POINTER(ctype))
 
 
@@ -615,13 +617,9 @@ def run_program(program, inputs, params=None, on_region=None, dtype=np.float32,
     out = np.zeros((lanes, len(p.outputs)), dtype=dtype)
     err = ctypes.create_string_buffer(ERR_LEN)
     v = p.array
-    fp = ctypes.POINTER(ctypes.c_double if dtype == np.float64 else ctypes.c_float)
-
-    def ptr(a):
-        return a.ctypes.data_as(fp) if a.size else None
     if dtype == np.float64:
-        ok = lib().stam_program_run_f64(_ptr(v), len(v), ptr(x), lanes, ptr(values), len(values),
-                                        ptr(out), err, len(err))
+        ok = lib().stam_program_run_f64(_ptr(v), len(v), _ptr(x), lanes, _ptr(values),
+                                        len(values), _ptr(out), err, len(err))
     else:
         failure = []
         # Regions inside one that no lane of a batch runs are not reported
@@ -648,8 +646,8 @@ def run_program(program, inputs, params=None, on_region=None, dtype=np.float32,
         # (a hook's type called with nothing: the NULL function)
         hooks = (_ELEMENTARY(call_elementary) if elementary else _ELEMENTARY(),
                  _REGION(call_region) if on_region else _REGION())
-        ok = lib().stam_program_run(_ptr(v), len(v), ptr(x), lanes, ptr(values), len(values),
-                                    ptr(out), hooks[0], hooks[1], None, err, len(err))
+        ok = lib().stam_program_run(_ptr(v), len(v), _ptr(x), lanes, _ptr(values), len(values),
+                                    _ptr(out), hooks[0], hooks[1], None, err, len(err))
         if failure:
             raise failure[0]
         for position in sorted(masks):
