@@ -400,7 +400,8 @@ public:
                     m_params.push_back(p);
                 } else if (type == PType::Object) {
                     throw ParamError("parameter '" + name + "' cannot take a texture (of the "
-                                     "material's parameters only 'twist', 'sigma_um' and 'height_um' can)");
+                                     "material's parameters only " +
+                                     m_textures.textured_names() + " can)");
                 } else {
                     throw ParamError("parameter '" + name + "' has type " +
                                      std::string(property_type_name(type)) +

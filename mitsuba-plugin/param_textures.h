@@ -6,6 +6,9 @@
  * value up to the texture's largest (a Gaussian's `sigma_um_max`, a sine
  * profile's `height_um_max`; a rect profile's powers are a closed form in
  * the height); this header gives each lane the texture's value there.
+ * Which parameters take a texture, on which materials, what the material
+ * is then built for and the range of each point's value are the core's
+ * (stam_param_takes_texture, stam_texture_plan).
  * The twist map is diffraction.cpp's (a frame rotation, every variant);
  * maps holding NaN (a twist map: also infinities) are refused here. No
  * physics.
@@ -34,7 +37,7 @@ template <typename Float, typename Spectrum> struct ParamTextures {
     using Param = PluginParam<Float>;
 
     /// One textured parameter: its name, STAM_PARAM_* id, texture, and the
-    /// range its values are clamped into.
+    /// range its values are clamped into (the core's: stam_texture_plan).
     struct Entry {
         std::string name;
         uint32_t id;
@@ -44,17 +47,26 @@ template <typename Float, typename Spectrum> struct ParamTextures {
     std::vector<Entry> entries;
 
     /// Takes the property `name` when it is a texture on a parameter that
-    /// can have one (false: not one of those).
+    /// can have one (false: not one of those; the core decides which)
     bool take(const Properties &props, const std::string &name) {
-        uint32_t id = name == "sigma_um" ? STAM_PARAM_SIGMA_UM
-                      : name == "height_um" ? STAM_PARAM_HEIGHT_UM
-                                            : STAM_PARAMS;
-        if (id == STAM_PARAMS)
+        if (!stam_param_takes_texture(name.c_str()))
             return false;
-        // sigma: 1e-6 um (a mirror) for zero, negative and NaN values
-        entries.push_back({ name, id, props.get_unbounded_texture<Texture>(name),
-                            id == STAM_PARAM_SIGMA_UM ? 1e-6f : 0.f, 0.f });
+        entries.push_back({ name, (uint32_t) param_id(name),
+                            props.get_unbounded_texture<Texture>(name) });
         return true;
+    }
+
+    /// The parameters that take a texture, for messages: the plugin's twist
+    /// and the core's ("'twist', 'sigma_um' and 'height_um'")
+    static std::string textured_names() {
+        std::vector<std::string> names{ "'twist'" };
+        for (uint32_t id = 0; id < STAM_PARAMS; ++id)
+            if (stam_param_takes_texture(stam_param_name(id)))
+                names.push_back("'" + std::string(stam_param_name(id)) + "'");
+        std::string out;
+        for (size_t i = 0; i < names.size(); ++i)
+            out += (i == 0 ? "" : i + 1 == names.size() ? " and " : ", ") + names[i];
+        return out;
     }
 
     bool owns(const std::string &key) const {
@@ -62,11 +74,11 @@ template <typename Float, typename Spectrum> struct ParamTextures {
                            [&](const Entry &e) { return e.name == key; });
     }
 
-    /// Checks where each texture may go and adds the core's parameters: the
-    /// texture's mean as the parameter (where one value is needed: the
-    /// sampling's constants) and, for sigma and a sine profile's height,
-    /// its largest value as `sigma_um_max` / `height_um_max` (unless
-    /// given), which the programs are built for.
+    /// Checks where each texture may go and adds the core's parameters
+    /// (stam_texture_plan: the texture's mean as the parameter, where one
+    /// value is needed, such as the sampling's constants; the largest value
+    /// the programs are built for, unless given) and the range each point's
+    /// value is clamped into.
     void attach(std::vector<Param> &params) {
         for (Entry &e : entries) {
             if constexpr (!dr::is_jit_v<Float>) {
@@ -74,49 +86,23 @@ template <typename Float, typename Spectrum> struct ParamTextures {
                                  "variants (llvm_ad_*, cuda_ad_*); in the scalar variants give "
                                  "a number");
             } else {
-                std::string surface = text_of(params, "surface"),
-                            profile = text_of(params, "profile");
                 refuse_nan(e.name, e.texture.get(), false);
-                double max_um;
-                bool sine = false;
-                if (e.id == STAM_PARAM_SIGMA_UM) {
-                    if (surface != "gaussian")
-                        throw ParamError("parameter 'sigma_um' takes a texture only on surface "
-                                         "\"gaussian\"; other surfaces take a number");
-                    auto given = find(params, "sigma_um_max");
-                    max_um = given != params.end() ? given->given : shortest(largest(e));
-                    if (given == params.end())
-                        params.push_back(number("sigma_um_max", max_um, -1));
-                } else {
-                    bool rect = profile == "rect" || (surface == "cd" && profile.empty());
-                    if (!rect && profile != "sine")
-                        throw ParamError("parameter 'height_um' takes a texture only with the "
-                                         "rect and sine profiles (surface \"cd\", or "
-                                         "\"periodic\" with profile \"rect\" or \"sine\")");
-                    if (rect) {
-                        max_um = shortest(largest(e));
-                    } else {
-                        auto given = find(params, "height_um_max");
-                        max_um = given != params.end() ? given->given : shortest(largest(e));
-                        if (given == params.end())
-                            params.push_back(number("height_um_max", max_um, -1));
-                    }
-                    sine = !rect;
-                }
-                if (!(max_um > 0.0))
-                    throw ParamError("parameter '" + e.name + "': the texture's largest value is " +
-                                     std::to_string(max_um) + "; it must be positive somewhere");
-                // sigma and a sine's height: what the programs are built
-                // for; a rect's height: the core's upper bound (its powers
-                // are a closed form)
-                e.max = e.id == STAM_PARAM_SIGMA_UM || sine ? (ScalarFloat) max_um : 100.f;
-                double mean = shortest(dr::slice(dr::detach(e.texture->mean()), 0));
-                // (the core wants sigma_um <= sigma_um_max and height_um <=
-                // height_um_max, in double)
-                mean = std::isfinite(mean) && mean > 0.0
-                           ? std::clamp(mean, (double) std::max(e.floor, 1e-6f), max_um)
-                           : max_um;
-                params.push_back(number(e.name.c_str(), mean, (int) e.id));
+                double largest_value = shortest(largest(e)),
+                       mean = shortest(dr::slice(dr::detach(e.texture->mean()), 0));
+                char err[1024] = { 0 };
+                char *answer = stam_texture_plan(build_json(params).c_str(), e.name.c_str(),
+                                                 largest_value, mean, err, sizeof err);
+                if (!answer)
+                    throw ParamError(err);
+                JsonValue plan = parse_json(answer);
+                stam_text_free(answer);
+                const JsonValue *add = plan.get("add"), *range = plan.get("range");
+                if (!add || !range || range->items.size() != 2)
+                    throw ParamError("the core's texture plan of '" + e.name + "' is incomplete");
+                for (const auto &[key, value] : add->members)
+                    params.push_back(number(key.c_str(), value.number, param_id(key)));
+                e.floor = (ScalarFloat) range->items[0].number;
+                e.max = (ScalarFloat) range->items[1].number;
             }
         }
     }
@@ -143,17 +129,6 @@ template <typename Float, typename Spectrum> struct ParamTextures {
     }
 
 private:
-    static typename std::vector<Param>::iterator find(std::vector<Param> &params,
-                                                      const char *name) {
-        return std::find_if(params.begin(), params.end(),
-                            [&](const Param &p) { return p.name == name; });
-    }
-
-    static std::string text_of(std::vector<Param> &params, const char *name) {
-        auto it = find(params, name);
-        return it == params.end() ? std::string() : it->text;
-    }
-
     /// A float as the shortest decimal that reads back as it (0.4f as 0.4,
     /// not 0.4000000059604645), so that the core and the object's string
     /// form show the texture's values as the user wrote them.

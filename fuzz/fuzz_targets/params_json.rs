@@ -205,6 +205,24 @@ fuzz_target!(|data: &[u8]| {
             }
             stam_text_free(answer);
         }
+        // A texture's plan on the material (its key left out) at two of the
+        // floats: a JSON plan, or a refusal with a message.
+        if let Ok(serde_json::Value::Object(mut obj)) = serde_json::from_str(resolved) {
+            for name in [c"sigma_um", c"height_um", c"corr_um"] {
+                obj.remove(name.to_str().unwrap());
+                let params = CString::new(serde_json::Value::Object(obj.clone()).to_string()).unwrap();
+                let plan = stam_texture_plan(params.as_ptr(), name.as_ptr(), at(9) as f64, at(10) as f64, err.as_mut_ptr(), err.len());
+                if plan.is_null() {
+                    assert!(err[0] != 0, "a texture plan refused without a message");
+                } else {
+                    assert!(stam_param_takes_texture(name.as_ptr()) == 1, "a plan for a parameter that takes no texture");
+                    let text = std::ffi::CStr::from_ptr(plan).to_str().expect("UTF-8 plan");
+                    let value: serde_json::Value = serde_json::from_str(text).expect("JSON plan");
+                    assert!(value["range"][0].as_f64() <= value["range"][1].as_f64(), "texture range {text}");
+                    stam_text_free(plan);
+                }
+            }
+        }
         stam_brdf_free(p);
     }
 });

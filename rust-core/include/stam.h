@@ -306,6 +306,24 @@ const char *stam_brdf_params_json(const StamBrdf *b);
  * object form of fresnel). Static storage. */
 const char *stam_parameter_reference(void);
 
+/* Textures on the material's numbers (JIT hosts: a value per point, which
+ * the programs read as STAM_PARAM_*). stam_param_takes_texture: 1 where the
+ * parameter `name` takes a texture on some material ('sigma_um' of a
+ * Gaussian surface, 'height_um' of a rect or sine profile), else 0 (NULL
+ * included). stam_texture_plan: how a material takes a texture on `name`.
+ * `params_json` is the material's parameters without that key, `largest`
+ * and `mean` the texture's largest finite value and its mean. Returns JSON
+ * {"param": its STAM_PARAM_* id, "add": {key: number, ...}, the keys to add
+ * to the material's parameters (the parameter itself at the mean clamped
+ * into range; the largest value the programs are built for, 'sigma_um_max'
+ * or 'height_um_max', unless given), "range": [lo, hi], into which each
+ * point's value is clamped (NaN: lo)}, freed with stam_text_free; NULL with
+ * the reason in err, naming the parameter, where the material cannot take
+ * the texture. */
+int stam_param_takes_texture(const char *name);
+char *stam_texture_plan(const char *params_json, const char *name, double largest, double mean,
+                        char *err, size_t err_len);
+
 /* Bytes of memory the material holds (tables included; a Gaussian surface's
    RGB table once the first RGB evaluation has built it). */
 size_t stam_brdf_memory_bytes(const StamBrdf *b);
@@ -323,7 +341,8 @@ size_t stam_brdf_memory_bytes(const StamBrdf *b);
  * freed with stam_text_free; NULL with the message in err on bad input. */
 char *stam_rigorous_solve(const char *request_json, char *err, size_t err_len);
 
-/* Frees a string returned by stam_rigorous_solve (NULL is ignored). */
+/* Frees a string returned by stam_rigorous_solve or stam_texture_plan (NULL
+ * is ignored). */
 void stam_text_free(char *text);
 
 /* Library version string, e.g. "0.1.0" (static storage). */

@@ -709,15 +709,74 @@ pub unsafe extern "C" fn stam_rigorous_solve(
     err: *mut c_char,
     err_len: usize,
 ) -> *mut c_char {
-    if request_json.is_null() {
-        write_message(err, err_len, "request_json is NULL");
-        return std::ptr::null_mut();
-    }
-    let Ok(text) = CStr::from_ptr(request_json).to_str() else {
-        write_message(err, err_len, "request_json is not valid UTF-8");
+    text_answer(request_json, "request_json", err, err_len, |text| {
+        crate::rigorous::request::solve_json(text)
+    })
+}
+
+/// # Safety
+/// `params_json` and `name` must be NULL or NUL-terminated strings; `err`
+/// NULL or writable for `err_len` bytes. The answer is freed with
+/// `stam_text_free`.
+#[no_mangle]
+pub unsafe extern "C" fn stam_texture_plan(
+    params_json: *const c_char,
+    name: *const c_char,
+    largest: f64,
+    mean: f64,
+    err: *mut c_char,
+    err_len: usize,
+) -> *mut c_char {
+    let Some(name) = c_str(name) else {
+        write_message(err, err_len, "name is NULL or not valid UTF-8");
         return std::ptr::null_mut();
     };
-    match catch_unwind(|| crate::rigorous::request::solve_json(text)) {
+    text_answer(params_json, "params_json", err, err_len, |text| {
+        let plan = crate::material::textures::texture_plan(text, name, largest, mean)?;
+        let answer = serde_json::json!({
+            "param": plan.param as u32,
+            "add": plan.add,
+            "range": [plan.range.0, plan.range.1],
+        });
+        Ok(answer.to_string())
+    })
+}
+
+/// # Safety
+/// `name` must be NULL or a NUL-terminated string.
+#[no_mangle]
+pub unsafe extern "C" fn stam_param_takes_texture(name: *const c_char) -> i32 {
+    catch_unwind(|| c_str(name).is_some_and(crate::material::textures::takes_texture))
+        .unwrap_or(false) as i32
+}
+
+/// `text` as UTF-8 (None: NULL or not UTF-8).
+unsafe fn c_str<'a>(text: *const c_char) -> Option<&'a str> {
+    if text.is_null() {
+        return None;
+    }
+    CStr::from_ptr(text).to_str().ok()
+}
+
+/// `answer(input)` as a string to free with `stam_text_free`, or NULL with
+/// the reason in `err` (the input, called `what`, NULL or not UTF-8; the
+/// answer's error; a panic).
+unsafe fn text_answer(
+    input: *const c_char,
+    what: &str,
+    err: *mut c_char,
+    err_len: usize,
+    answer: impl FnOnce(&str) -> Result<String, crate::StamError> + std::panic::UnwindSafe,
+) -> *mut c_char {
+    if input.is_null() {
+        write_message(err, err_len, &format!("{what} is NULL"));
+        return std::ptr::null_mut();
+    }
+    let Some(text) = c_str(input) else {
+        write_message(err, err_len, &format!("{what} is not valid UTF-8"));
+        return std::ptr::null_mut();
+    };
+    match catch_unwind(|| answer(text)) {
         Ok(Ok(answer)) => {
             write_message(err, err_len, "");
             c_text(answer).into_raw()

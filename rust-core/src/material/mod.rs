@@ -19,6 +19,7 @@ mod program_tests;
 mod sampling_tests;
 #[cfg(test)]
 mod tests;
+pub mod textures;
 mod vertex;
 
 pub use crate::models::{

@@ -459,6 +459,28 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
         stam_text_free(NULL);
     }
 
+    /* Textures: which parameters take one, and the plan of one (the keys
+     * to add, the range), or a message naming the parameter. */
+    {
+        CHECK(69, stam_param_takes_texture("sigma_um") == 1 &&
+                      stam_param_takes_texture("height_um") == 1 &&
+                      stam_param_takes_texture("corr_um") == 0 && stam_param_takes_texture(NULL) == 0,
+              "stam_param_takes_texture");
+        char *plan = stam_texture_plan("{\"surface\":\"gaussian\",\"corr_um\":2,\"fresnel\":0.9}",
+                                       "sigma_um", 0.3, 0.1, err, sizeof err);
+        CHECK(70, plan != NULL && strstr(plan, "\"sigma_um_max\":0.3") != NULL &&
+                      strstr(plan, "\"range\":[1e-6,0.3]") != NULL &&
+                      strstr(plan, "\"param\":0") != NULL && err[0] == '\0',
+              "texture plan: %s", plan ? plan : err);
+        stam_text_free(plan);
+        plan = stam_texture_plan("{\"surface\":\"cd\"}", "sigma_um", 0.3, 0.1, err, sizeof err);
+        CHECK(71, plan == NULL && strstr(err, "'sigma_um' takes a texture only") != NULL,
+              "a misplaced texture is refused by name: %s", err);
+        CHECK(72, stam_texture_plan(NULL, "sigma_um", 1, 1, err, sizeof err) == NULL &&
+                      stam_texture_plan("{}", NULL, 1, 1, err, sizeof err) == NULL,
+              "NULL inputs are refused");
+    }
+
     /* NULL material: zeros, no crash. */
     stam_brdf_eval_spectral(NULL, N, wi, wo, lambda, out);
     CHECK(21, out[0] == 0.0f, "NULL material must give 0");

@@ -227,6 +227,14 @@ mod tests {
             h::stam_param_name as unsafe extern "C" fn(_) -> _,
             ffi::stam_param_name as unsafe extern "C" fn(_) -> _,
         );
+        same_signature(
+            h::stam_param_takes_texture as unsafe extern "C" fn(_) -> _,
+            ffi::stam_param_takes_texture as unsafe extern "C" fn(_) -> _,
+        );
+        same_signature(
+            h::stam_texture_plan as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
+            ffi::stam_texture_plan as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
+        );
         assert_eq!(h::STAM_FLAG_HAS_COHERENT, stam::material::FLAG_HAS_COHERENT);
         assert_eq!(h::STAM_FLAG_ANISOTROPIC, stam::material::FLAG_ANISOTROPIC);
         assert_eq!(

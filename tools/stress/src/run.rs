@@ -334,6 +334,7 @@ pub fn run(options: &Options) -> Report {
         report.fail(format!("stam_rigorous_solve: {message}"));
     }
     let mut rng = Rng::new(options.seed);
+    let mut texture_rng = Rng::new(options.seed ^ 0x7e87_0e5d);
     let mut kind = 0usize;
     let mut spectral_outputs = 0u64;
     while report.evaluations() < options.count {
@@ -362,6 +363,21 @@ pub fn run(options: &Options) -> Report {
         };
         report.materials += 1;
         report.materials_per_kind[this_kind] += 1;
+        // A texture's plan on this material: a plain one and a hostile one
+        // (from a generator of their own: the materials' stay as they were).
+        let hostile = [0.0, -1.0, f64::NAN, f64::INFINITY, 1e-9, 250.0];
+        let hostile = [
+            texture_rng.pick(&hostile),
+            texture_rng.log_range(1e-4, 10.0),
+        ];
+        let (largest, mean) = (texture_rng.pick(&hostile), texture_rng.pick(&hostile));
+        for problem in texture_plan_problems(&json, 0.2, 0.1)
+            .into_iter()
+            .chain(texture_plan_problems(&json, largest, mean))
+        {
+            report.bad_params_json += 1;
+            report.fail(problem);
+        }
         let brdf = unsafe { &(*material.0).brdf };
         let b = material.0 as *const ffi::StamBrdf;
         let n = options.batch;
@@ -1047,4 +1063,88 @@ fn rigorous_answers() -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The textured parameters' plans (`stam_texture_plan`) of the material
+/// `params_json` at a texture's `largest` and `mean`: for each of
+/// sigma_um, height_um and a parameter that takes none, the problems found.
+pub fn texture_plan_problems(params_json: &str, largest: f64, mean: f64) -> Vec<String> {
+    let Ok(serde_json::Value::Object(given)) = serde_json::from_str(params_json) else {
+        return vec![format!("not a JSON object: {params_json}")];
+    };
+    let mut found = Vec::new();
+    for name in ["sigma_um", "height_um", "corr_um"] {
+        let mut without = given.clone();
+        without.remove(name);
+        let text = CString::new(serde_json::Value::Object(without).to_string()).unwrap();
+        let c_name = CString::new(name).unwrap();
+        let takes = unsafe { ffi::stam_param_takes_texture(c_name.as_ptr()) };
+        let mut err = [0 as c_char; 512];
+        let answer = unsafe {
+            ffi::stam_texture_plan(
+                text.as_ptr(),
+                c_name.as_ptr(),
+                largest,
+                mean,
+                err.as_mut_ptr(),
+                err.len(),
+            )
+        };
+        if let Some(problem) = unsafe { texture_plan_problem(answer, &err, takes, name, &text) } {
+            found.push(format!(
+                "stam_texture_plan({name}, {largest}, {mean}): {problem}"
+            ));
+        }
+        unsafe { ffi::stam_text_free(answer) };
+    }
+    found
+}
+
+/// What is wrong with `stam_texture_plan`'s answer (not freed here) for
+/// parameter `name` of the material `params_json`, given that
+/// `stam_param_takes_texture(name)` said `takes`: a refusal must say why
+/// (and a parameter that takes no texture is always refused), a plan must
+/// be the parameter's, its range finite and ordered, its keys numbers with
+/// which the material builds.
+///
+/// # Safety
+/// `answer` NULL or a NUL-terminated string.
+pub unsafe fn texture_plan_problem(
+    answer: *const c_char,
+    err: &[c_char],
+    takes: i32,
+    name: &str,
+    params_json: &std::ffi::CStr,
+) -> Option<String> {
+    if answer.is_null() {
+        let message = std::ffi::CStr::from_ptr(err.as_ptr()).to_string_lossy();
+        let refused_by_name = message.contains(&format!("'{name}'"))
+            || (takes == 1 && !message.contains("internal error") && !message.is_empty());
+        return (!refused_by_name).then(|| format!("refused without saying why: {message:?}"));
+    }
+    if takes != 1 {
+        return Some("a plan for a parameter that takes no texture".into());
+    }
+    let text = std::ffi::CStr::from_ptr(answer).to_str().ok()?;
+    let Ok(plan) = serde_json::from_str::<serde_json::Value>(text) else {
+        return Some(format!("not JSON: {text}"));
+    };
+    let param = plan["param"].as_u64().unwrap_or(u64::MAX);
+    let own = stam::program::ParamId::ALL
+        .iter()
+        .any(|id| *id as u64 == param && id.name() == name);
+    let range = [plan["range"][0].as_f64(), plan["range"][1].as_f64()];
+    let ordered =
+        matches!(range, [Some(lo), Some(hi)] if lo.is_finite() && hi.is_finite() && lo <= hi);
+    let Some(add) = plan["add"].as_object() else {
+        return Some(format!("no keys to add: {text}"));
+    };
+    if !own || !ordered || !add.contains_key(name) || add.values().any(|v| !v.is_f64()) {
+        return Some(format!("not a plan of '{name}': {text}"));
+    }
+    let mut material: serde_json::Value = serde_json::from_str(params_json.to_str().ok()?).ok()?;
+    material.as_object_mut()?.extend(add.clone());
+    MaterialParams::from_json(&material.to_string())
+        .err()
+        .map(|e| format!("its material is refused: {e}"))
 }

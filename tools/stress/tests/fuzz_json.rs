@@ -382,6 +382,32 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
             return Err("stam_parameter_reference is not the reference's JSON".to_string());
         }
         rigorous_request(&at)?;
+        texture_plans(p, &at)?;
+    }
+    Ok(())
+}
+
+/// stam_texture_plan on the material's resolved parameters (the textured
+/// key left out) at the fuzzed floats as the texture's largest value and
+/// mean: a plan the material builds with, or a refusal saying why
+/// (`stress::run::texture_plan_problems`); NULL inputs refused.
+unsafe fn texture_plans(
+    p: *mut stam::ffi::StamBrdf,
+    at: &dyn Fn(usize) -> f32,
+) -> Result<(), String> {
+    use stam::ffi::*;
+    let resolved = std::ffi::CStr::from_ptr(stam_brdf_params_json(p)).to_string_lossy();
+    let (largest, mean) = (at(9) as f64, at(10) as f64);
+    if let Some(problem) = stress::run::texture_plan_problems(&resolved, largest, mean).first() {
+        return Err(problem.clone());
+    }
+    let mut err = [0 as c_char; 64];
+    let null = std::ptr::null();
+    let refused = stam_texture_plan(null, c"sigma_um".as_ptr(), 1.0, 1.0, err.as_mut_ptr(), 64)
+        .is_null()
+        && stam_texture_plan(c"{}".as_ptr(), null, 1.0, 1.0, err.as_mut_ptr(), 64).is_null();
+    if !refused || stam_param_takes_texture(null) != 0 {
+        return Err("stam_texture_plan or stam_param_takes_texture took NULL".into());
     }
     Ok(())
 }
