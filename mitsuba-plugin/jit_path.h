@@ -5,8 +5,10 @@
  * (stam_brdf_export_program; rust-core/src/material/program.rs) with Dr.Jit
  * operations (program.h). This header holds the four programs a variant
  * runs and drives them: which kind for which variant, the inputs in the
- * order stam.h gives, spectral variants' per-wavelength runs and mixture
- * pdf, the luminance of monochromatic variants. No physics: the frame
+ * order stam.h gives, spectral variants' per-wavelength eval (the sampling,
+ * pdf and coherent lobe of their wavelengths' mixture are the core's
+ * mixture programs, stam_brdf_export_mixture_program), the luminance of
+ * monochromatic variants. No physics: the frame
  * (twist, tracks) and the BSDF contract (cosines, masks, sample weights)
  * are diffraction.cpp's, the formulas the core's.
  */
@@ -44,31 +46,38 @@ public:
     JitPath() = default;
 
     /// The programs of the kinds this variant runs (RGB kinds for RGB and
-    /// monochromatic variants, spectral kinds for spectral ones), each
-    /// checked against the inputs and outputs stam.h gives its kind; their
-    /// tables stay host values until `load_tables`. Throws ParamError
-    /// naming the kinds the core does not export for the material.
+    /// monochromatic variants; for spectral ones the spectral eval and the
+    /// mixture programs over the path's NW wavelengths), each checked
+    /// against the inputs and outputs stam.h gives its kind; their tables
+    /// stay host values until `load_tables`. Throws ParamError naming the
+    /// kinds the core does not export for the material.
     static JitPath build(const StamBrdf *core) {
         JitPath j;
         constexpr bool sp = IsSpectral;
+        static_assert(NW <= STAM_MIXTURE_MAX_WAVELENGTHS, "more wavelengths than the core mixes");
         struct Kind {
             uint32_t code;
+            bool mixture;
             const char *name;
             size_t inputs, outputs;
             Prog *dst, *at_built;
         };
         const Kind kinds[] = {
-            { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB,
+            { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB, false,
               sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.m_eval,
               &j.m_eval_at_built },
-            { sp ? STAM_PROGRAM_PDF_SPECTRAL : STAM_PROGRAM_PDF_RGB,
-              sp ? "PDF_SPECTRAL" : "PDF_RGB", sp ? 7u : 6u, 1u, &j.m_pdf, &j.m_pdf_at_built },
-            { sp ? STAM_PROGRAM_SAMPLE_SPECTRAL : STAM_PROGRAM_SAMPLE_RGB,
-              sp ? "SAMPLE_SPECTRAL" : "SAMPLE_RGB", sp ? 7u : 6u, 4u, &j.m_sample,
+            { sp ? STAM_MIXTURE_PDF : STAM_PROGRAM_PDF_RGB, sp, sp ? "MIXTURE_PDF" : "PDF_RGB",
+              6u + NW, 1u, &j.m_pdf, &j.m_pdf_at_built },
+            { sp ? STAM_MIXTURE_SAMPLE : STAM_PROGRAM_SAMPLE_RGB, sp,
+              sp ? "MIXTURE_SAMPLE" : "SAMPLE_RGB", 6u + NW, 4u, &j.m_sample,
               &j.m_sample_at_built },
-            { sp ? STAM_PROGRAM_COHERENT_SPECTRAL : STAM_PROGRAM_COHERENT_RGB,
-              sp ? "COHERENT_SPECTRAL" : "COHERENT_RGB", sp ? 4u : 3u, sp ? 2u : 4u,
+            { sp ? STAM_MIXTURE_COHERENT : STAM_PROGRAM_COHERENT_RGB, sp,
+              sp ? "MIXTURE_COHERENT" : "COHERENT_RGB", 3u + NW, sp ? NW + 1 : 4u,
               &j.m_coherent, &j.m_coherent_at_built },
+        };
+        auto exported = [&](const Kind &k, uint32_t flags) {
+            return k.mixture ? program::export_mixture_program(core, k.code | flags, (uint32_t) NW)
+                             : program::export_program(core, k.code | flags);
         };
         auto checked = [&](const Kind &k, const std::vector<float> &v) {
             Prog p(v, j.m_host_tables);
@@ -83,7 +92,7 @@ public:
         std::string missing;
         try {
             for (const Kind &k : kinds) {
-                std::vector<float> v = program::export_program(core, k.code);
+                std::vector<float> v = exported(k, 0);
                 if (v.empty()) {
                     missing += (missing.empty() ? "" : ", ") + std::string(k.name);
                     continue;
@@ -91,7 +100,7 @@ public:
                 *k.dst = checked(k, v);
                 // Where the core has one, the kind's program for the built
                 // parameters (run while they are: `Params::at_built`)
-                v = program::export_program(core, k.code | STAM_PROGRAM_AT_BUILT);
+                v = exported(k, STAM_PROGRAM_AT_BUILT);
                 if (!v.empty())
                     *k.at_built = checked(k, v);
             }
@@ -166,67 +175,42 @@ public:
         }
     }
 
-    /// The glossy density at wo; spectral: the mean of the wavelengths'
-    /// densities, the density of `sample`'s mixture
+    /// The glossy density at wo; spectral: the density of the wavelengths'
+    /// mixture (the core's MIXTURE_PDF)
     Float pdf(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
               const FloatStorage &tables, const Params &params) const {
-        if constexpr (IsSpectral) {
-            Float p = 0.f;
-            for (size_t j = 0; j < NW; ++j)
-                p += pick(m_pdf, m_pdf_at_built, params)
-                         .run(inputs(wi, &wo, { wl[j] }), tables, params)[0];
-            return p * (1.f / NW);
-        } else {
-            DRJIT_MARK_USED(wl);
-            return pick(m_pdf, m_pdf_at_built, params).run(inputs(wi, &wo, {}), tables, params)[0];
-        }
+        return pick(m_pdf, m_pdf_at_built, params)
+            .run(inputs(wi, &wo, wavelengths(wl)), tables, params)[0];
     }
 
     /// A direction from the SAMPLE program (core frame) and whether it is
-    /// the coherent lobe's. Spectral: sample1 picks one of the path's
-    /// wavelengths uniformly and is remapped to [0, 1) for the program.
+    /// the coherent lobe's; spectral: the mixture's (MIXTURE_SAMPLE, whose
+    /// sample1 picks one of the path's wavelengths)
     std::pair<Vector3f, Mask> sample(const Vector3f &wi, const Float &sample1,
                                      const Point2f &sample2, const Wavelength &wl,
                                      const FloatStorage &tables, const Params &params) const {
-        std::vector<Float> o;
-        if constexpr (IsSpectral) {
-            Float x = sample1 * (float) NW;
-            Float j = dr::clip(dr::floor(x), 0.f, (float) (NW - 1));
-            Float u0 = dr::clip(x - j, 0.f, dr::OneMinusEpsilon<Float>);
-            Float lambda = wl[0];
-            for (size_t k = 1; k < NW; ++k)
-                lambda = dr::select(j == (float) k, wl[k], lambda);
-            o = pick(m_sample, m_sample_at_built, params)
-                    .run(inputs(wi, nullptr, { u0, sample2.x(), sample2.y(), lambda }), tables,
-                         params);
-        } else {
-            DRJIT_MARK_USED(wl);
-            o = pick(m_sample, m_sample_at_built, params)
-                    .run(inputs(wi, nullptr, { sample1, sample2.x(), sample2.y() }), tables, params);
-        }
+        std::vector<Float> extra{ sample1, sample2.x(), sample2.y() };
+        for (const Float &l : wavelengths(wl))
+            extra.push_back(l);
+        std::vector<Float> o =
+            pick(m_sample, m_sample_at_built, params).run(inputs(wi, nullptr, extra), tables, params);
         return { Vector3f(o[0], o[1], o[2]), o[3] > .5f };
     }
 
     /// The coherent lobe at wi: its reflectance and the probability that
-    /// `sample` picks it (spectral: the mean over the path's wavelengths,
-    /// the mixture's probability of the common mirror direction)
+    /// `sample` picks it (spectral: each wavelength's reflectance and the
+    /// mixture's probability, MIXTURE_COHERENT)
     std::pair<UnpolarizedSpectrum, Float> coherent(const Vector3f &wi, const Wavelength &wl,
                                                    const FloatStorage &tables,
                                                    const Params &params) const {
+        std::vector<Float> o = pick(m_coherent, m_coherent_at_built, params)
+                                   .run(inputs(wi, nullptr, wavelengths(wl)), tables, params);
         if constexpr (IsSpectral) {
             UnpolarizedSpectrum r;
-            Float p = 0.f;
-            for (size_t j = 0; j < NW; ++j) {
-                std::vector<Float> o = pick(m_coherent, m_coherent_at_built, params)
-                                           .run(inputs(wi, nullptr, { wl[j] }), tables, params);
-                r[j] = o[0];
-                p += o[1];
-            }
-            return { r, p * (1.f / NW) };
+            for (size_t j = 0; j < NW; ++j)
+                r[j] = o[j];
+            return { r, o[NW] };
         } else {
-            DRJIT_MARK_USED(wl);
-            std::vector<Float> o =
-                pick(m_coherent, m_coherent_at_built, params).run(inputs(wi, nullptr, {}), tables, params);
             return { from_rgb(o), o[3] };
         }
     }
@@ -238,13 +222,24 @@ private:
         return params.at_built && at_built.valid() ? at_built : plain;
     }
 
+    /// The path's wavelengths as inputs (none in RGB and monochromatic
+    /// variants)
+    static std::vector<Float> wavelengths(const Wavelength &wl) {
+        std::vector<Float> v;
+        if constexpr (IsSpectral)
+            for (size_t j = 0; j < NW; ++j)
+                v.push_back(wl[j]);
+        DRJIT_MARK_USED(wl);
+        return v;
+    }
+
     /// The inputs of a program: the directions (core frame), then extras
     static std::vector<Float> inputs(const Vector3f &a, const Vector3f *b,
-                                     std::initializer_list<Float> extra) {
+                                     const std::vector<Float> &extra) {
         std::vector<Float> in{ a.x(), a.y(), a.z() };
         if (b)
             in.insert(in.end(), { b->x(), b->y(), b->z() });
-        in.insert(in.end(), extra);
+        in.insert(in.end(), extra.begin(), extra.end());
         return in;
     }
 

@@ -306,6 +306,17 @@ inline std::vector<float> export_program(const StamBrdf *b, uint32_t kind) {
     return v;
 }
 
+/// The core's mixture program (STAM_MIXTURE_*, with STAM_PROGRAM_AT_BUILT
+/// where wanted) over `n_wavelengths` as an array, empty where it has none
+inline std::vector<float> export_mixture_program(const StamBrdf *b, uint32_t kind,
+                                                 uint32_t n_wavelengths) {
+    size_t n = stam_brdf_export_mixture_program(b, kind, n_wavelengths, nullptr, 0);
+    std::vector<float> v(n);
+    if (n && stam_brdf_export_mixture_program(b, kind, n_wavelengths, v.data(), n) != n)
+        throw Malformed("the core wrote a program of another length than it announced");
+    return v;
+}
+
 /// The host values of the tables of several programs, each distinct table
 /// once (programs of one material share some: the spectral Gaussian's eval
 /// and pdf read the same 281,502-value series table), loaded by the caller

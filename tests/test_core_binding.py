@@ -556,6 +556,20 @@ def test_export_program_round_trip(entry):
             assert b.export_program(kind) is None, kind
         with pytest.raises(TypeError):
             b.export_program(1.5)
+        # The mixture programs: the kind's inputs and outputs for N
+        # wavelengths where the material has spectral programs; none for N
+        # out of range or a kind that is not one.
+        spectral = b.export_program(F.PROGRAM_PDF_SPECTRAL) is not None
+        for kind in range(F.MIXTURE_KINDS):
+            for n in (1, 4, F.MIXTURE_MAX_WAVELENGTHS):
+                a = b.export_mixture_program(kind, n)
+                assert (a is not None) == spectral, (entry['name'], kind, n)
+                if a is not None:
+                    io = [(6 + n, 1), (6 + n, 4), (3 + n, n + 1)][kind]
+                    assert (a[1], a[2]) == io and a[5] == len(a)
+            for n in (0, F.MIXTURE_MAX_WAVELENGTHS + 1, -1):
+                assert b.export_mixture_program(kind, n) is None
+        assert b.export_mixture_program(F.MIXTURE_KINDS, 4) is None
 
 
 def test_energy_conserving_materials_export_programs():

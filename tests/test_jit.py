@@ -90,8 +90,10 @@ def report(**fields):
 
 
 def kinds_for(variant):
+    """The kinds a variant runs: a spectral one, the spectral eval and the
+    mixture programs over its 4 wavelengths (MIXTURE_KINDS)."""
     if 'spectral' in variant:
-        return ('eval_spectral', 'pdf_spectral', 'sample_spectral', 'coherent_spectral')
+        return ('eval_spectral', 'mixture_pdf', 'mixture_sample', 'mixture_coherent')
     return ('eval_rgb', 'pdf_rgb', 'sample_rgb', 'coherent_rgb')
 
 
@@ -273,10 +275,20 @@ PROGRAM_KINDS = {
 }
 
 
+# Mixture kinds (STAM_MIXTURE_* of stam.h), over the 4 wavelengths of
+# Mitsuba's spectral variants: name -> code.
+MIXTURE_KINDS = {'mixture_pdf': stam_core.MIXTURE_PDF, 'mixture_sample': stam_core.MIXTURE_SAMPLE,
+                 'mixture_coherent': stam_core.MIXTURE_COHERENT}
+
+
 def export_program(brdf, kind, at_built=False):
-    """The float32 array of stam_brdf_export_program for a
+    """The float32 array of stam_brdf_export_program (a mixture kind's:
+    stam_brdf_export_mixture_program over 4 wavelengths) for a
     stam_diffraction.core.Brdf, or None where the material has none
     (`at_built`: the kind's program for the built parameters)."""
+    if kind in MIXTURE_KINDS:
+        flag = stam_core.PROGRAM_AT_BUILT if at_built else 0
+        return brdf.export_mixture_program(MIXTURE_KINDS[kind] | flag, 4)
     import ctypes
     lib = stam_core.lib()
     fn = lib.stam_brdf_export_program
@@ -501,20 +513,15 @@ def run32(prog, inputs, elementary=True):
 
 def program_pdf(progs, wi, wo, lam):
     if mi.is_spectral:
-        return np.mean([run32(progs['pdf_spectral'], [*wi.T, *wo.T, lam[:, j]])[0]
-                        for j in range(4)], axis=0, dtype=np.float64)
+        return run32(progs['mixture_pdf'], [*wi.T, *wo.T, *lam.T])[0].astype(np.float64)
     return run32(progs['pdf_rgb'], [*wi.T, *wo.T])[0].astype(np.float64)
 
 
 def program_sample(progs, wi, u, lam):
-    """The SAMPLE program as the plugin drives it: spectral, u0 picks one of
-    the four wavelengths and is remapped."""
+    """The SAMPLE program (spectral: the mixture's, whose u0 picks one of the
+    four wavelengths)."""
     if mi.is_spectral:
-        x = (u[:, 0] * 4.0).astype(np.float32)
-        j = np.clip(np.floor(x), 0, 3).astype(int)
-        u0 = np.clip(x - j, 0.0, 1.0 - 2.0 ** -24)
-        out = run32(progs['sample_spectral'],
-                    [*wi.T, u0, u[:, 1], u[:, 2], lam[np.arange(len(j)), j]])
+        out = run32(progs['mixture_sample'], [*wi.T, *u.T, *lam.T])
     else:
         out = run32(progs['sample_rgb'], [*wi.T, *u.T])
     return np.stack(out[:3], axis=1).astype(np.float64), out[3] > 0.5
@@ -523,9 +530,8 @@ def program_sample(progs, wi, u, lam):
 def program_coherent(progs, wi, lam):
     """(R (channels, n), the sampling probability (n,))."""
     if mi.is_spectral:
-        outs = [run32(progs['coherent_spectral'], [*wi.T, lam[:, j]]) for j in range(4)]
-        return (np.stack([o[0] for o in outs]).astype(np.float64),
-                np.mean([o[1] for o in outs], axis=0, dtype=np.float64))
+        o = run32(progs['mixture_coherent'], [*wi.T, *lam.T])
+        return np.stack(o[:4]).astype(np.float64), o[4].astype(np.float64)
     o = run32(progs['coherent_rgb'], [*wi.T])
     r = np.stack(o[:3]).astype(np.float64)
     if mi.is_monochromatic:
@@ -694,7 +700,7 @@ def exported_programs():
     out = []
     for name, params in SURFACES.items():
         with stam_core.Brdf(params) as c:
-            for k in PROGRAM_KINDS:
+            for k in [*PROGRAM_KINDS, *MIXTURE_KINDS]:
                 v = export_program(c, k)
                 if v is not None:
                     out.append(('%s/%s' % (name, k), v))

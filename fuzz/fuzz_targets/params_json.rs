@@ -163,6 +163,18 @@ fuzz_target!(|data: &[u8]| {
                 }
             }
         }
+        // The mixture programs over 4 wavelengths decode, with 4 wavelength
+        // inputs; none for a count out of range.
+        for kind in 0..3u32 {
+            let len = stam_brdf_export_mixture_program(p, kind, 4, std::ptr::null_mut(), 0);
+            let mut array = vec![0.0f32; len];
+            assert!(stam_brdf_export_mixture_program(p, kind, 4, array.as_mut_ptr(), len) == len);
+            if len > 0 {
+                let prog = stam::program::decode(&array).expect("a mixture program decodes");
+                assert!(prog.n_inputs == [10, 10, 7][kind as usize], "mixture inputs");
+            }
+            assert!(stam_brdf_export_mixture_program(p, kind, 17, std::ptr::null_mut(), 0) == 0);
+        }
         assert!(stam_brdf_export_program(p, 8, std::ptr::null_mut(), 0) == 0);
         assert!(stam_brdf_export_program(p, u32::MAX, std::ptr::null_mut(), 0) == 0);
         let _ = stam_brdf_flags(p);

@@ -123,6 +123,19 @@ PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
               PROGRAM_SAMPLE_RGB: (6, 4), PROGRAM_SAMPLE_SPECTRAL: (7, 4),
               PROGRAM_COHERENT_RGB: (3, 4), PROGRAM_COHERENT_SPECTRAL: (4, 2)}
 
+# Mixture programs (STAM_MIXTURE_* of stam.h, read from it): a spectral
+# renderer's one-sample mixture over the N wavelengths of a path, each
+# wavelength's strategy an equally weighted component (export_mixture_program):
+#   MIXTURE_PDF       wi[3] wo[3] lambda[N] -> the mixture's glossy density
+#   MIXTURE_SAMPLE    wi[3] u[3] lambda[N]  -> wo[3], coherent (u0 picks lambda_j)
+#   MIXTURE_COHERENT  wi[3] lambda[N]       -> N reflectances, the probability
+_MIXTURE = _header_macros('MIXTURE_')
+MIXTURE_PDF = _MIXTURE['PDF']
+MIXTURE_SAMPLE = _MIXTURE['SAMPLE']
+MIXTURE_COHERENT = _MIXTURE['COHERENT']
+MIXTURE_KINDS = _MIXTURE['KINDS']
+MIXTURE_MAX_WAVELENGTHS = _MIXTURE['MAX_WAVELENGTHS']
+
 # The program array (stam.h: STAM_PROGRAM_FORMAT, read from it): a header of
 # PROGRAM_HEADER_LEN values (format, inputs, outputs, instructions, tables,
 # total length, parameters, 0), the output registers, (offset, length) per
@@ -198,6 +211,7 @@ def lib():
         'stam_brdf_flags': (ctypes.c_uint32, [vp]),
         'stam_brdf_memory_bytes': (sz, [vp]),
         'stam_brdf_export_program': (sz, [vp, ctypes.c_uint32, fp, sz]),
+        'stam_brdf_export_mixture_program': (sz, [vp, ctypes.c_uint32, ctypes.c_uint32, fp, sz]),
         'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
         'stam_brdf_params_json': (ctypes.c_char_p, [vp]),
         'stam_parameter_reference': (ctypes.c_char_p, []),
@@ -332,13 +346,29 @@ class Brdf:
         kind = operator.index(kind)
         if not 0 <= kind < 2 ** 32:
             return None
-        n = int(self._lib.stam_brdf_export_program(self._handle(), kind, None, 0))
+        return self._exported(lambda out, n: self._lib.stam_brdf_export_program(
+            self._handle(), kind, out, n))
+
+    def export_mixture_program(self, kind, n_wavelengths):
+        """The mixture program of `kind` (MIXTURE_PDF, MIXTURE_SAMPLE,
+        MIXTURE_COHERENT, plus PROGRAM_AT_BUILT) over `n_wavelengths` (1 ..
+        MIXTURE_MAX_WAVELENGTHS; stam_brdf_export_mixture_program) as a float32
+        array for run_program, or None where the material has none."""
+        kind, n_wavelengths = operator.index(kind), operator.index(n_wavelengths)
+        if not (0 <= kind < 2 ** 32 and 0 <= n_wavelengths < 2 ** 32):
+            return None
+        return self._exported(lambda out, n: self._lib.stam_brdf_export_mixture_program(
+            self._handle(), kind, n_wavelengths, out, n))
+
+    def _exported(self, export):
+        """The array `export(out, capacity)` writes, sized with out = NULL."""
+        n = int(export(None, 0))
         if n == 0:
             return None
         out = np.empty(n, dtype=np.float32)
-        written = int(self._lib.stam_brdf_export_program(self._handle(), kind, _ptr(out), n))
+        written = int(export(_ptr(out), n))
         if written != n:
-            raise RuntimeError('stam_diffraction.core: export_program wrote %d of %d'
+            raise RuntimeError('stam_diffraction.core: a program export wrote %d of %d'
                                % (written, n))
         return out
 

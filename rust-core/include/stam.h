@@ -175,6 +175,28 @@ uint32_t stam_brdf_flags(const StamBrdf *b);
 size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
                                 size_t capacity);
 
+/* The programs of a spectral renderer's one-sample mixture over the N
+ * wavelengths a path carries (1 <= N <= STAM_MIXTURE_MAX_WAVELENGTHS): each
+ * wavelength's strategy (the SPECTRAL kinds') one equally weighted
+ * component, as the vertex calls above (nw wavelengths). Same array, same
+ * STAM_PROGRAM_AT_BUILT flag; inputs and outputs:
+ *   MIXTURE_PDF       wi[3] wo[3] lambda[N] -> the mixture's glossy density
+ *                                              (the mean of PDF_SPECTRAL's)
+ *   MIXTURE_SAMPLE    wi[3] u[3] lambda[N]  -> wo[3], coherent: u0 picks
+ *                     wavelength j = floor(N u0), then SAMPLE_SPECTRAL at
+ *                     lambda_j with u0 remapped to N u0 - j
+ *   MIXTURE_COHERENT  wi[3] lambda[N]       -> each wavelength's coherent
+ *                     reflectance (N), the mixture's probability (the mean)
+ * Returns 0 where the material has no spectral programs, N is out of range
+ * or b is NULL; sized and written as stam_brdf_export_program. */
+#define STAM_MIXTURE_PDF 0u
+#define STAM_MIXTURE_SAMPLE 1u
+#define STAM_MIXTURE_COHERENT 2u
+#define STAM_MIXTURE_KINDS 3u
+#define STAM_MIXTURE_MAX_WAVELENGTHS 16u
+size_t stam_brdf_export_mixture_program(const StamBrdf *b, uint32_t kind, uint32_t n_wavelengths,
+                                        float *out, size_t capacity);
+
 /* Material parameters a program reads through its parameter op (Param,
  * code 29): the array's parameter section lists (id, value) pairs, the
  * value the program was built with; a renderer may substitute its own

@@ -14,6 +14,7 @@ pub use program::{
 
 use crate::material::params::{parameter_reference, resolved_json_text};
 use crate::material::plausibility::warnings_for_json;
+use crate::material::program::ProgramKind;
 use crate::material::Brdf;
 use crate::material::Channels;
 use glam::DVec3;
@@ -639,30 +640,68 @@ pub unsafe extern "C" fn stam_brdf_export_program(
     out: *mut f32,
     capacity: usize,
 ) -> usize {
+    export(b, kind, out, capacity, |brdf, code, at_built| {
+        let kind = ProgramKind::from_code(code)?;
+        match at_built {
+            true => brdf.program_at_built(kind),
+            false => brdf.program(kind),
+        }
+    })
+}
+
+/// # Safety
+/// `b` NULL or valid; `out` NULL or valid for `capacity` floats.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_export_mixture_program(
+    b: *const StamBrdf,
+    kind: u32,
+    n_wavelengths: u32,
+    out: *mut f32,
+    capacity: usize,
+) -> usize {
+    use crate::material::program::MixtureKind;
+    export(b, kind, out, capacity, |brdf, code, at_built| {
+        let (kind, n) = (MixtureKind::from_code(code)?, n_wavelengths as usize);
+        match at_built {
+            true => brdf.mixture_program_at_built(kind, n),
+            false => brdf.mixture_program(kind, n),
+        }
+    })
+}
+
+/// The program `program(material, code, at_built)` gives for `code` (with
+/// STAM_PROGRAM_AT_BUILT split off) written as `write_program` does; 0 for
+/// none, a NULL material or a panic.
+unsafe fn export(
+    b: *const StamBrdf,
+    code: u32,
+    out: *mut f32,
+    capacity: usize,
+    program: impl FnOnce(&Brdf, u32, bool) -> Option<crate::program::Program>,
+) -> usize {
     if b.is_null() {
         return 0;
     }
     catch_unwind(AssertUnwindSafe(|| {
-        use crate::material::program::ProgramKind;
-        let at_built = kind & ProgramKind::AT_BUILT != 0;
-        let Some(kind) = ProgramKind::from_code(kind & !ProgramKind::AT_BUILT) else {
-            return 0;
-        };
-        let program = if at_built {
-            (*b).brdf.program_at_built(kind)
-        } else {
-            (*b).brdf.program(kind)
-        };
-        let Some(program) = program else {
-            return 0;
-        };
-        let encoded = program.encode();
-        if !out.is_null() && capacity >= encoded.len() {
-            std::ptr::copy_nonoverlapping(encoded.as_ptr(), out, encoded.len());
-        }
-        encoded.len()
+        let at_built = code & ProgramKind::AT_BUILT != 0;
+        program(&(*b).brdf, code & !ProgramKind::AT_BUILT, at_built)
+            .map_or(0, |p| write_program(&p, out, capacity))
     }))
     .unwrap_or(0)
+}
+
+/// The encoded program's length, the program written to `out` where it
+/// fits in `capacity` floats.
+unsafe fn write_program(
+    program: &crate::program::Program,
+    out: *mut f32,
+    capacity: usize,
+) -> usize {
+    let encoded = program.encode();
+    if !out.is_null() && capacity >= encoded.len() {
+        std::ptr::copy_nonoverlapping(encoded.as_ptr(), out, encoded.len());
+    }
+    encoded.len()
 }
 
 /// # Safety

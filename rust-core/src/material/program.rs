@@ -65,6 +65,56 @@ impl ProgramKind {
     }
 }
 
+/// The programs of a spectral renderer's one-sample mixture over the N
+/// wavelengths a path carries (the native `Brdf::mixture_sampler`): each
+/// wavelength's strategy (the spectral kinds') an equally weighted
+/// component. Exported for any N in 1..=MAX_MIXTURE_WAVELENGTHS
+/// (`Brdf::mixture_program`; STAM_MIXTURE_* in stam.h), so that a host
+/// holds no mixture rule. Inputs / outputs:
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MixtureKind {
+    /// wi (3), wo (3), lambda (N) -> the mixture's glossy density at wo
+    /// (the mean of the wavelengths' PdfSpectral).
+    Pdf = 0,
+    /// wi (3), u (3), lambda (N) -> wo (3), coherent: u0 picks wavelength
+    /// j = floor(N u0) and, remapped to N u0 - j, samples with u1, u2 as
+    /// SampleSpectral at lambda_j.
+    Sample = 1,
+    /// wi (3), lambda (N) -> each wavelength's coherent reflectance (N),
+    /// the mixture's coherent probability (the mean of the wavelengths').
+    Coherent = 2,
+}
+
+/// The most wavelengths a mixture program takes.
+pub const MAX_MIXTURE_WAVELENGTHS: usize = 16;
+
+impl MixtureKind {
+    pub const ALL: [MixtureKind; 3] =
+        [MixtureKind::Pdf, MixtureKind::Sample, MixtureKind::Coherent];
+
+    pub fn from_code(code: u32) -> Option<MixtureKind> {
+        Self::ALL.get(code as usize).copied()
+    }
+
+    /// The kind's (inputs, outputs) for n wavelengths.
+    pub fn io(self, n: usize) -> (usize, usize) {
+        match self {
+            MixtureKind::Pdf => (6 + n, 1),
+            MixtureKind::Sample => (6 + n, 4),
+            MixtureKind::Coherent => (3 + n, n + 1),
+        }
+    }
+}
+
+/// A probability as an output: in [0, 1] where `ok`, else 0.
+fn probability<'a>(ok: Mask<'a>, p: Value<'a>) -> Value<'a> {
+    ok.select(p.finite_non_negative().min(1.0), 0.0)
+}
+
+/// The largest f32 below 1: where a remapped uniform is clamped.
+const ONE_MINUS_F32: f64 = 1.0 - 1.0 / 16_777_216.0;
+
 fn input3(b: &Builder) -> Vec3<'_> {
     [b.input(), b.input(), b.input()]
 }
@@ -172,37 +222,14 @@ impl Brdf {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
                 let (wo, ok_o) = upper_direction(&b, input3(&b));
                 let lambda = kind.spectral().then(|| band(b.input()).0);
-                let pdf = match model.pdf_program(&b, &shading, wi, wo, lambda) {
-                    Some(p) => p,
-                    None => {
-                        let p_c = model.coherent_probability_program(&b, &shading, wi, lambda)?;
-                        (1.0 - p_c) * cosine_density_program(wo)
-                    }
-                };
+                let pdf = self.glossy_pdf(&b, wi, wo, lambda)?;
                 vec![(ok_i & ok_o).select(pdf.finite_non_negative(), 0.0)]
             }
             ProgramKind::SampleRgb | ProgramKind::SampleSpectral => {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
                 let u = [b.input(), b.input(), b.input()];
                 let lambda = kind.spectral().then(|| band(b.input()).0);
-                let s = match model.sample_program(&b, &shading, wi, lambda, u) {
-                    Some(s) => s,
-                    None => {
-                        let p_c = model.coherent_probability_program(&b, &shading, wi, lambda)?;
-                        let coherent = u[0].lt(p_c);
-                        let glossy = cosine_direction_program(&b, u[1], u[2]);
-                        let mirror = [-wi[0], -wi[1], wi[2]];
-                        crate::models::SampleProgram {
-                            wo: std::array::from_fn(|j| coherent.select(mirror[j], glossy[j])),
-                            coherent,
-                        }
-                    }
-                };
-                // A failed sample: below the horizon, not coherent.
-                let wo = s.wo.map(|c| ok_i.select(c, 0.0));
-                let wo = [wo[0], wo[1], ok_i.select(wo[2], -1.0)];
-                let coherent = (s.coherent & ok_i).select(1.0, 0.0);
-                vec![wo[0], wo[1], wo[2], coherent]
+                self.sample_outputs(&b, wi, ok_i, lambda, u)?
             }
             ProgramKind::CoherentRgb | ProgramKind::CoherentSpectral => {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
@@ -222,22 +249,183 @@ impl Brdf {
                     (gamut_map_program(rgb).to_vec(), None, ok_i)
                 } else {
                     let (lambda, in_band) = band(b.input());
-                    let mut r = model.coherent_spectral_program(&b, &shading, wi[2], lambda)?;
-                    if let Some(e) = energy {
-                        r = r * e.pair(wi, mirror, Some(lambda))?;
-                    }
+                    let r = self.coherent_reflectance(&b, energy, wi, mirror, lambda)?;
                     (vec![r], Some(lambda), ok_i & in_band)
                 };
-                let p_c = model.coherent_probability_program(&b, &shading, wi, lambda)?;
+                let p_c = self.coherent_probability_of(&b, wi, lambda)?;
                 let mut out: Vec<Value> = rgb
                     .into_iter()
                     .map(|c| ok.select(c.finite_non_negative(), 0.0))
                     .collect();
-                out.push(ok_i.select(p_c.finite_non_negative().min(1.0), 0.0));
+                out.push(probability(ok_i, p_c));
                 out
             }
         };
         Some(b.finish(&outputs))
+    }
+
+    /// The strategy's glossy density at wo (unit wi, wo above the horizon;
+    /// lambda None: RGB), as `Brdf::pdf`: the model's, or the cosine part
+    /// of a model without a density of its own.
+    fn glossy_pdf<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        wo: Vec3<'a>,
+        lambda: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        let model = self.surface.programs();
+        let shading = self.shading();
+        match model.pdf_program(b, &shading, wi, wo, lambda) {
+            Some(p) => Some(p),
+            None => {
+                let p_c = model.coherent_probability_program(b, &shading, wi, lambda)?;
+                Some((1.0 - p_c) * cosine_density_program(wo))
+            }
+        }
+    }
+
+    /// A sample's outputs (wo, coherent as 1 or 0) at wi (`ok_i`: above the
+    /// horizon) from uniforms `u`, as `Brdf::sample`; a failed sample points
+    /// below the horizon.
+    fn sample_outputs<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        ok_i: Mask<'a>,
+        lambda: Option<Value<'a>>,
+        u: [Value<'a>; 3],
+    ) -> Option<Vec<Value<'a>>> {
+        let model = self.surface.programs();
+        let shading = self.shading();
+        let s = match model.sample_program(b, &shading, wi, lambda, u) {
+            Some(s) => s,
+            None => {
+                let p_c = model.coherent_probability_program(b, &shading, wi, lambda)?;
+                let coherent = u[0].lt(p_c);
+                let glossy = cosine_direction_program(b, u[1], u[2]);
+                let mirror = [-wi[0], -wi[1], wi[2]];
+                crate::models::SampleProgram {
+                    wo: std::array::from_fn(|j| coherent.select(mirror[j], glossy[j])),
+                    coherent,
+                }
+            }
+        };
+        let wo = s.wo.map(|c| ok_i.select(c, 0.0));
+        let wo = [wo[0], wo[1], ok_i.select(wo[2], -1.0)];
+        let coherent = (s.coherent & ok_i).select(1.0, 0.0);
+        Some(vec![wo[0], wo[1], wo[2], coherent])
+    }
+
+    /// The coherent lobe's reflectance at wi (its mirror direction
+    /// `mirror`) and an in-band wavelength, scaled by the energy table
+    /// where the material has one.
+    fn coherent_reflectance<'a>(
+        &self,
+        b: &'a Builder,
+        energy: Option<&super::energy::TableProgram<'a>>,
+        wi: Vec3<'a>,
+        mirror: Vec3<'a>,
+        lambda: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let model = self.surface.programs();
+        let mut r = model.coherent_spectral_program(b, &self.shading(), wi[2], lambda)?;
+        if let Some(e) = energy {
+            r = r * e.pair(wi, mirror, Some(lambda))?;
+        }
+        Some(r)
+    }
+
+    /// The probability that sampling at wi picks the coherent lobe (the
+    /// model's, before `probability`).
+    fn coherent_probability_of<'a>(
+        &self,
+        b: &'a Builder,
+        wi: Vec3<'a>,
+        lambda: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        let model = self.surface.programs();
+        model.coherent_probability_program(b, &self.shading(), wi, lambda)
+    }
+
+    /// The mixture program of `kind` over `n` wavelengths (1..=
+    /// MAX_MIXTURE_WAVELENGTHS); None where the material has no spectral
+    /// programs or n is out of range.
+    pub fn mixture_program(&self, kind: MixtureKind, n: usize) -> Option<Program> {
+        self.mixture_program_with(kind, n, self.plain_builder())
+    }
+
+    /// `mixture_program` for a renderer that passes every parameter at its
+    /// built value (`program_at_built`); None where it would be the same.
+    pub fn mixture_program_at_built(&self, kind: MixtureKind, n: usize) -> Option<Program> {
+        let lean = self.mixture_program_with(kind, n, Builder::at_built_values())?;
+        let plain = self.mixture_program(kind, n)?;
+        (lean.encode() != plain.encode()).then_some(lean)
+    }
+
+    fn mixture_program_with(&self, kind: MixtureKind, n: usize, b: Builder) -> Option<Program> {
+        if self.surface.is_unfactored() || !(1..=MAX_MIXTURE_WAVELENGTHS).contains(&n) {
+            return None;
+        }
+        let scale = 1.0 / n as f64;
+        let outputs = match kind {
+            MixtureKind::Pdf => {
+                let (wi, ok_i) = upper_direction(&b, input3(&b));
+                let (wo, ok_o) = upper_direction(&b, input3(&b));
+                let lambdas: Vec<Value> = (0..n).map(|_| band(b.input()).0).collect();
+                let mut sum = b.c(0.0);
+                for lambda in lambdas {
+                    sum = sum
+                        + self
+                            .glossy_pdf(&b, wi, wo, Some(lambda))?
+                            .finite_non_negative();
+                }
+                vec![(ok_i & ok_o).select(sum * scale, 0.0)]
+            }
+            MixtureKind::Sample => {
+                let (wi, ok_i) = upper_direction(&b, input3(&b));
+                let u = [b.input(), b.input(), b.input()];
+                let lambdas: Vec<Value> = (0..n).map(|_| b.input()).collect();
+                // u0 picks the component and, remapped, goes on to it.
+                let u0 = u[0].finite().select(u[0], 0.0);
+                let x = u0 * n as f64;
+                let j = x.floor().clamp(0.0, (n - 1) as f64);
+                let u0 = (x - j).clamp(0.0, ONE_MINUS_F32);
+                let mut lambda = lambdas[0];
+                for (k, &l) in lambdas.iter().enumerate().skip(1) {
+                    lambda = j.eq(k as f64).select(l, lambda);
+                }
+                let lambda = band(lambda).0;
+                self.sample_outputs(&b, wi, ok_i, Some(lambda), [u0, u[1], u[2]])?
+            }
+            MixtureKind::Coherent => {
+                let (wi, ok_i) = upper_direction(&b, input3(&b));
+                let mirror = [-wi[0], -wi[1], wi[2]];
+                let lambdas: Vec<Value> = (0..n).map(|_| b.input()).collect();
+                let energy_table = self.energy_table();
+                let energy = energy_table.map(|e| e.program(&b, &self.coherent_derivatives(&b)));
+                let mut out = Vec::with_capacity(n + 1);
+                let mut p_sum = b.c(0.0);
+                for raw in lambdas {
+                    let (lambda, in_band) = band(raw);
+                    let r = self.coherent_reflectance(&b, energy.as_ref(), wi, mirror, lambda)?;
+                    let p_c = self.coherent_probability_of(&b, wi, Some(lambda))?;
+                    out.push((ok_i & in_band).select(r.finite_non_negative(), 0.0));
+                    p_sum = p_sum + probability(ok_i, p_c);
+                }
+                out.push(p_sum * scale);
+                out
+            }
+        };
+        Some(b.finish(&outputs))
+    }
+
+    /// The energy table's derivatives the coherent spectral program reads.
+    fn coherent_derivatives(&self, b: &Builder) -> Vec<&TableDerivative> {
+        match b.at_built() {
+            true => Vec::new(),
+            false => self.derivatives_read_by(ProgramKind::CoherentSpectral),
+        }
     }
 
     /// The energy table's derivatives along the parameters that the

@@ -206,3 +206,92 @@ fn materials_differing_in_numbers_share_their_code() {
         }
     }
 }
+
+/// The mixture programs are the mixture of the spectral kinds' programs:
+/// the pdf their mean, the sample the picked wavelength's at the remapped
+/// uniform, the coherent outputs theirs and their probabilities' mean
+/// (f64 runs to 1e-7, N = 1, 3, 4; in-band and out-of-band wavelengths; each
+/// model, the disc's conserving table per wavelength included). The
+/// spectral kinds' programs are checked against the native strategies in
+/// the models' tests.
+#[test]
+fn mixture_programs_are_the_spectral_programs_mixed() {
+    use super::program::{MixtureKind, MAX_MIXTURE_WAVELENGTHS};
+    let mut rng = crate::benchmark::SplitMix64(17);
+    for json in [
+        r#"{"surface": "gaussian", "sigma_um": 0.02, "corr_um": 2, "fresnel": "gold"}"#,
+        r#"{"surface": "fractal", "sigma_um": 0.05, "hurst": 0.7, "lag_um": 2}"#,
+        r#"{"surface": "cd"}"#,
+        r#"{"surface": "periodic", "period_um": 1.6, "profile": "sine", "height_um": 0.12, "coherence_um": 6, "energy": "stam"}"#,
+    ] {
+        let brdf = Brdf::from_json(json).unwrap();
+        let single = |kind| brdf.program(kind).unwrap();
+        let (pdf1, sample1, coherent1) = (
+            single(ProgramKind::PdfSpectral),
+            single(ProgramKind::SampleSpectral),
+            single(ProgramKind::CoherentSpectral),
+        );
+        for n in [1usize, 3, 4] {
+            let mixture = |kind| brdf.mixture_program(kind, n).unwrap();
+            let (pdf, sample, coherent) = (
+                mixture(MixtureKind::Pdf),
+                mixture(MixtureKind::Sample),
+                mixture(MixtureKind::Coherent),
+            );
+            for (trial, (wi, wo)) in crate::testing::programs::pairs(200, 5)
+                .into_iter()
+                .enumerate()
+            {
+                let lambdas: Vec<f64> = (0..n)
+                    .map(|j| match (trial + j) % 9 {
+                        0 => 300.0,
+                        _ => 380.0 + 400.0 * rng.next_f64(),
+                    })
+                    .collect();
+                let u = rng.three();
+                let (wi3, wo3) = (wi.to_array(), wo.to_array());
+                // (1 / N is an f32 constant in the array: 3e-8 off for N = 3.)
+                let close =
+                    |a: f64, b: f64| (a - b).abs() <= 1e-7 * a.abs().max(b.abs()).max(1e-300);
+                // pdf: the mean of the wavelengths'
+                let mean: f64 = lambdas
+                    .iter()
+                    .map(|&l| pdf1.run(&[&wi3[..], &wo3[..], &[l]].concat())[0])
+                    .sum::<f64>()
+                    / n as f64;
+                let got = pdf.run(&[&wi3[..], &wo3[..], &lambdas[..]].concat())[0];
+                assert!(close(got, mean), "{json} N {n}: pdf {got} against {mean}");
+                // sample: the picked wavelength's
+                let x = u[0] * n as f64;
+                let j = x.floor().clamp(0.0, (n - 1) as f64);
+                let u0 = (x - j).clamp(0.0, 1.0 - 1.0 / 16_777_216.0);
+                let want =
+                    sample1.run(&[&wi3[..], &[u0, u[1], u[2], lambdas[j as usize]]].concat());
+                let got = sample.run(&[&wi3[..], &u[..], &lambdas[..]].concat());
+                assert!(
+                    got.iter().zip(&want).all(|(a, b)| close(*a, *b)),
+                    "{json} N {n}: sample {got:?} against {want:?}"
+                );
+                // coherent: each wavelength's reflectance, the mean probability
+                let each: Vec<Vec<f64>> = lambdas
+                    .iter()
+                    .map(|&l| coherent1.run(&[&wi3[..], &[l]].concat()))
+                    .collect();
+                let got = coherent.run(&[&wi3[..], &lambdas[..]].concat());
+                let p_mean = each.iter().map(|o| o[1]).sum::<f64>() / n as f64;
+                assert!(close(got[n], p_mean), "{json} N {n}: coherent probability");
+                for (g, o) in got.iter().zip(&each) {
+                    assert!(
+                        close(*g, o[0]),
+                        "{json} N {n}: coherent reflectance {g} against {}",
+                        o[0]
+                    );
+                }
+            }
+        }
+        // N out of range: none.
+        for n in [0, MAX_MIXTURE_WAVELENGTHS + 1] {
+            assert!(brdf.mixture_program(MixtureKind::Pdf, n).is_none());
+        }
+    }
+}

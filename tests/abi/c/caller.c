@@ -266,6 +266,49 @@ static int check_program_run(const StamBrdf *b, char *report, size_t report_len)
     return 0;
 }
 
+/* Checks of stam_brdf_export_mixture_program: the mixture pdf over 4
+ * wavelengths (inputs wi, wo, lambda[4]; one output) run on a lane is the
+ * mean of PDF_SPECTRAL's at each wavelength (run the same way), within
+ * 1e-6 relative; N out of range, a kind out of range and NULL give 0. */
+static float run_one(const StamBrdf *b, int mixture, uint32_t kind, uint32_t n_wl,
+                     const float *x, char *err, size_t err_len) {
+    const size_t n = mixture ? stam_brdf_export_mixture_program(b, kind, n_wl, NULL, 0)
+                             : stam_brdf_export_program(b, kind, NULL, 0);
+    float *prog = n ? malloc(n * sizeof(float)) : NULL, out = -1.0f;
+    if (prog == NULL) return -1.0f;
+    if (mixture)
+        stam_brdf_export_mixture_program(b, kind, n_wl, prog, n);
+    else
+        stam_brdf_export_program(b, kind, prog, n);
+    if (!stam_program_run(prog, n, x, 1, NULL, 0, &out, NULL, NULL, NULL, err, err_len))
+        out = -1.0f;
+    free(prog);
+    return out;
+}
+
+static int check_mixture_program(const StamBrdf *b, char *report, size_t report_len) {
+    const float wl[4] = {420.0f, 510.0f, 600.0f, 690.0f};
+    float x[10] = {0.3f, 0.1f, 0.9486833f, -0.2f, 0.05f, 0.9783149f};
+    char err[256];
+    for (int j = 0; j < 4; ++j) x[6 + j] = wl[j];
+    const float mixed = run_one(b, 1, STAM_MIXTURE_PDF, 4, x, err, sizeof err);
+    float mean = 0.0f;
+    for (int j = 0; j < 4; ++j) {
+        float one[7] = {x[0], x[1], x[2], x[3], x[4], x[5], wl[j]};
+        mean += 0.25f * run_one(b, 0, STAM_PROGRAM_PDF_SPECTRAL, 0, one, err, sizeof err);
+    }
+    CHECK(73, mixed > 0.0f && fabsf(mixed - mean) <= 1e-6f * mean,
+          "mixture pdf %g against the mean of the wavelengths' %g (%s)", mixed, mean, err);
+    CHECK(74, STAM_MIXTURE_KINDS == 3u && STAM_MIXTURE_MAX_WAVELENGTHS == 16u &&
+                  stam_brdf_export_mixture_program(b, STAM_MIXTURE_PDF, 0, NULL, 0) == 0 &&
+                  stam_brdf_export_mixture_program(b, STAM_MIXTURE_PDF, 17, NULL, 0) == 0 &&
+                  stam_brdf_export_mixture_program(b, STAM_MIXTURE_KINDS, 4, NULL, 0) == 0 &&
+                  stam_brdf_export_mixture_program(NULL, STAM_MIXTURE_PDF, 4, NULL, 0) == 0 &&
+                  stam_brdf_export_mixture_program(b, STAM_MIXTURE_COHERENT, 16, NULL, 0) > 0,
+          "mixture programs out of range");
+    return 0;
+}
+
 /* stam_brdf_coherent_probability of the material params_json at n lanes,
  * for the Rust side to compare with Brdf::coherent_probability. Returns 0,
  * or -1 when the material is refused. */
@@ -389,6 +432,13 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     }
     {
         int code = check_program_run(b, report, report_len);
+        if (code != 0) {
+            stam_brdf_free(b);
+            return code;
+        }
+    }
+    {
+        int code = check_mixture_program(b, report, report_len);
         if (code != 0) {
             stam_brdf_free(b);
             return code;

@@ -228,6 +228,10 @@ mod tests {
             ffi::stam_param_name as unsafe extern "C" fn(_) -> _,
         );
         same_signature(
+            h::stam_brdf_export_mixture_program as unsafe extern "C" fn(_, _, _, _, _) -> _,
+            ffi::stam_brdf_export_mixture_program as unsafe extern "C" fn(_, _, _, _, _) -> _,
+        );
+        same_signature(
             h::stam_param_takes_texture as unsafe extern "C" fn(_) -> _,
             ffi::stam_param_takes_texture as unsafe extern "C" fn(_) -> _,
         );
@@ -270,6 +274,30 @@ mod tests {
         // The built parameters' flag, added to a kind's code.
         assert_eq!(h::STAM_PROGRAM_AT_BUILT, K::AT_BUILT);
         assert_eq!(K::from_code(h::STAM_PROGRAM_AT_BUILT), None);
+    }
+
+    /// The mixture kinds of the header (STAM_MIXTURE_*) are the core's
+    /// `MixtureKind` codes, STAM_MIXTURE_KINDS their number, and the most
+    /// wavelengths the core's.
+    #[test]
+    fn header_mixture_kinds_match_rust() {
+        use c_header as h;
+        use stam::material::program::MixtureKind as K;
+        let header = [
+            (h::STAM_MIXTURE_PDF, K::Pdf),
+            (h::STAM_MIXTURE_SAMPLE, K::Sample),
+            (h::STAM_MIXTURE_COHERENT, K::Coherent),
+        ];
+        for (code, kind) in header {
+            assert_eq!(code, kind as u32, "{kind:?}");
+            assert_eq!(K::from_code(code), Some(kind));
+        }
+        assert_eq!(h::STAM_MIXTURE_KINDS as usize, K::ALL.len());
+        assert_eq!(K::from_code(h::STAM_MIXTURE_KINDS), None);
+        assert_eq!(
+            h::STAM_MIXTURE_MAX_WAVELENGTHS as usize,
+            stam::material::program::MAX_MIXTURE_WAVELENGTHS
+        );
     }
 
     /// The parameter ids of the header (STAM_PARAM_*) are the core's

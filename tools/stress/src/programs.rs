@@ -247,6 +247,108 @@ pub fn check(programs: &[Option<Program>], lanes: &[Lane]) -> Checked {
     c
 }
 
+/// Wavelengths a mixture lane carries besides its own: the lane's
+/// wavelength first (hostile or not), then these.
+pub const MIXTURE_OTHERS: [f32; 3] = [450.0, 551.5, 680.0];
+
+/// Checks the mixture programs over 4 wavelengths (`stam_brdf_export_
+/// mixture_program`: pdf, sample, coherent, in the order of
+/// STAM_MIXTURE_*) against the spectral kinds' programs (`singles`, by
+/// STAM_PROGRAM_* code) on every lane in f32: the pdf the mean of
+/// PDF_SPECTRAL's, the sample SAMPLE_SPECTRAL's at the wavelength u0 picks
+/// (u0 remapped), the coherent outputs COHERENT_SPECTRAL's and their
+/// probabilities' mean; within 1e-6 of each other's magnitude.
+pub fn check_mixtures(
+    mixtures: &[Program],
+    singles: &[Option<Program>],
+    lanes: &[Lane],
+) -> Checked {
+    let mut c = Checked::default();
+    let (Some(pdf1), Some(sample1), Some(coherent1)) = (&singles[3], &singles[5], &singles[7])
+    else {
+        c.violations.push("no spectral programs to mix".into());
+        return c;
+    };
+    let names = ["MIXTURE_PDF", "MIXTURE_SAMPLE", "MIXTURE_COHERENT"];
+    let io = [(10, 1), (10, 4), (7, 5)];
+    for (k, p) in mixtures.iter().enumerate() {
+        if (p.n_inputs, p.outputs.len()) != io[k] {
+            c.violations.push(format!(
+                "{}: inputs / outputs {:?}",
+                names[k],
+                (p.n_inputs, p.outputs.len())
+            ));
+            return c;
+        }
+    }
+    let close = |a: &[f32], b: &[f32]| {
+        a.len() == b.len()
+            && a.iter().zip(b).all(|(x, y)| {
+                x.to_bits() == y.to_bits()
+                    || (x - y).abs() <= 1e-6 * x.abs().max(y.abs()).max(1e-30)
+            })
+    };
+    for lane in lanes.iter().map(Lane::with_valid_uniforms) {
+        let lambdas = [
+            lane.lambda,
+            MIXTURE_OTHERS[0],
+            MIXTURE_OTHERS[1],
+            MIXTURE_OTHERS[2],
+        ];
+        let single = |p: &Program, mut inputs: Vec<f32>, lambda: f32| {
+            inputs.push(lambda);
+            p.run(&inputs)
+        };
+        let with = |mut inputs: Vec<f32>| {
+            inputs.extend(lambdas);
+            inputs
+        };
+        let (wi, wiwo, wiu) = (
+            lane.wi.to_vec(),
+            [lane.wi, lane.wo].concat(),
+            [lane.wi, lane.u].concat(),
+        );
+        // pdf
+        let got = mixtures[0].run(&with(wiwo.clone()));
+        let mut sum = 0f32;
+        for &l in &lambdas {
+            sum += single(pdf1, wiwo.clone(), l)[0];
+        }
+        let want = [sum * 0.25];
+        // sample
+        let x = lane.u[0] * 4.0;
+        let j = x.floor().clamp(0.0, 3.0);
+        let u0 = (x - j).clamp(0.0, 1.0 - 1.0 / 16_777_216.0);
+        let got_s = mixtures[1].run(&with(wiu.clone()));
+        let want_s = single(
+            sample1,
+            [&lane.wi[..], &[u0, lane.u[1], lane.u[2]]].concat(),
+            lambdas[j as usize],
+        );
+        // coherent
+        let got_c = mixtures[2].run(&with(wi.clone()));
+        let each: Vec<Vec<f32>> = lambdas
+            .iter()
+            .map(|&l| single(coherent1, wi.clone(), l))
+            .collect();
+        let mut want_c: Vec<f32> = each.iter().map(|o| o[0]).collect();
+        want_c.push(each.iter().map(|o| o[1]).sum::<f32>() * 0.25);
+        c.runs += 3 + 9;
+        for (name, got, want) in [
+            (names[0], &got[..], &want[..]),
+            (names[1], &got_s[..], &want_s[..]),
+            (names[2], &got_c[..], &want_c[..]),
+        ] {
+            if !close(got, want) {
+                c.violations.push(format!(
+                    "{name} {got:?}, the spectral programs mixed {want:?}, at {lane:?}"
+                ));
+            }
+        }
+    }
+    c
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

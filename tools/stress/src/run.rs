@@ -909,6 +909,45 @@ fn check_programs(
     for v in checked.violations {
         fail(report, v);
     }
+    // The mixture programs over 4 wavelengths, where the spectral kinds
+    // exist: the Rust API's, and the spectral programs mixed.
+    if decoded[3].is_none() {
+        return;
+    }
+    use stam::material::program::MixtureKind;
+    let mut mixtures = Vec::new();
+    for kind in MixtureKind::ALL {
+        let export = |out: *mut f32, capacity: usize| unsafe {
+            ffi::stam_brdf_export_mixture_program(b, kind as u32, 4, out, capacity)
+        };
+        let n = export(std::ptr::null_mut(), 0);
+        let mut array = vec![0.0f32; n];
+        let written = export(array.as_mut_ptr(), n);
+        let rust = brdf.mixture_program(kind, 4).map(|p| p.encode());
+        if n == 0 || written != n || rust.as_deref() != Some(&array[..]) {
+            fail(
+                report,
+                format!(
+                    "stam_brdf_export_mixture_program {kind:?}: {n} floats, not the Rust API's"
+                ),
+            );
+            return;
+        }
+        match stam::program::decode(&array) {
+            Some(p) => mixtures.push(p),
+            None => {
+                return fail(
+                    report,
+                    format!("mixture {kind:?}: the array does not decode"),
+                )
+            }
+        }
+    }
+    let checked = programs::check_mixtures(&mixtures, &decoded, lanes);
+    report.program_runs += checked.runs;
+    for v in checked.violations {
+        fail(report, v);
+    }
 }
 
 /// The core's executor through the ABI (stam_program_run, in f32 and f64)

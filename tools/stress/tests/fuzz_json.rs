@@ -313,6 +313,30 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
             }
             decoded.push(Some(program));
         }
+        // The mixture programs over 4 wavelengths: the spectral ones mixed;
+        // none for a count out of range.
+        if decoded[3].is_some() {
+            let mut mixtures = Vec::new();
+            for kind in 0..3 {
+                let len = stam_brdf_export_mixture_program(p, kind, 4, std::ptr::null_mut(), 0);
+                let mut array = vec![0.0f32; len];
+                stam_brdf_export_mixture_program(p, kind, 4, array.as_mut_ptr(), len);
+                let out_of_range =
+                    stam_brdf_export_mixture_program(p, kind, 0, std::ptr::null_mut(), 0);
+                match stam::program::decode(&array) {
+                    Some(program) if out_of_range == 0 => mixtures.push(program),
+                    _ => {
+                        return Err(format!(
+                            "stam_brdf_export_mixture_program {kind}: {len} floats"
+                        ))
+                    }
+                }
+            }
+            let checked = programs::check_mixtures(&mixtures, &decoded, &lanes);
+            if let Some(v) = checked.violations.first() {
+                return Err(format!("mixture: {v}"));
+            }
+        }
         // The executor refuses what is not a program: NULL, and these
         // floats as an array; a parameter id past the last has no name.
         let mut err = [0 as c_char; 64];
