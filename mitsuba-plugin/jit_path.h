@@ -59,34 +59,35 @@ public:
             uint32_t code;
             bool mixture;
             const char *name;
-            size_t inputs, outputs;
             Prog *dst, *at_built;
         };
         const Kind kinds[] = {
             { sp ? STAM_PROGRAM_EVAL_SPECTRAL : STAM_PROGRAM_EVAL_RGB, false,
-              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", sp ? 7u : 6u, sp ? 1u : 3u, &j.m_eval,
-              &j.m_eval_at_built },
+              sp ? "EVAL_SPECTRAL" : "EVAL_RGB", &j.m_eval, &j.m_eval_at_built },
             { sp ? STAM_MIXTURE_PDF : STAM_PROGRAM_PDF_RGB, sp, sp ? "MIXTURE_PDF" : "PDF_RGB",
-              6u + NW, 1u, &j.m_pdf, &j.m_pdf_at_built },
+              &j.m_pdf, &j.m_pdf_at_built },
             { sp ? STAM_MIXTURE_SAMPLE : STAM_PROGRAM_SAMPLE_RGB, sp,
-              sp ? "MIXTURE_SAMPLE" : "SAMPLE_RGB", 6u + NW, 4u, &j.m_sample,
-              &j.m_sample_at_built },
+              sp ? "MIXTURE_SAMPLE" : "SAMPLE_RGB", &j.m_sample, &j.m_sample_at_built },
             { sp ? STAM_MIXTURE_COHERENT : STAM_PROGRAM_COHERENT_RGB, sp,
-              sp ? "MIXTURE_COHERENT" : "COHERENT_RGB", 3u + NW, sp ? NW + 1 : 4u,
-              &j.m_coherent, &j.m_coherent_at_built },
+              sp ? "MIXTURE_COHERENT" : "COHERENT_RGB", &j.m_coherent, &j.m_coherent_at_built },
         };
+        const uint32_t n_wavelengths = sp ? (uint32_t) NW : 0u;
         auto exported = [&](const Kind &k, uint32_t flags) {
-            return k.mixture ? program::export_mixture_program(core, k.code | flags, (uint32_t) NW)
+            return k.mixture ? program::export_mixture_program(core, k.code | flags, n_wavelengths)
                              : program::export_program(core, k.code | flags);
         };
+        // The kind's inputs and outputs as the core's header gives them
+        // (stam_program_io), against the program's own
         auto checked = [&](const Kind &k, const std::vector<float> &v) {
             Prog p(v, j.m_host_tables);
-            if (p.n_inputs() != k.inputs || p.n_outputs() != k.outputs)
+            uint32_t inputs = 0, outputs = 0;
+            stam_program_io(k.code, k.mixture ? n_wavelengths : 0u, &inputs, &outputs);
+            if (p.n_inputs() != inputs || p.n_outputs() != outputs)
                 throw program::Malformed(
                     std::string(k.name) + " takes " + std::to_string(p.n_inputs()) +
                     " inputs and gives " + std::to_string(p.n_outputs()) +
-                    " outputs, stam.h says " + std::to_string(k.inputs) + " and " +
-                    std::to_string(k.outputs));
+                    " outputs, stam.h says " + std::to_string(inputs) + " and " +
+                    std::to_string(outputs));
             return p;
         };
         std::string missing;

@@ -515,7 +515,11 @@ def test_program_constants_are_the_header_and_the_core():
              F.PROGRAM_PDF_SPECTRAL, F.PROGRAM_SAMPLE_RGB, F.PROGRAM_SAMPLE_SPECTRAL,
              F.PROGRAM_COHERENT_RGB, F.PROGRAM_COHERENT_SPECTRAL]
     assert kinds == list(range(8)) and F.PROGRAM_KINDS == 8
-    assert sorted(F.PROGRAM_IO) == kinds
+    assert [F.program_io(k) for k in kinds] == [(6, 3), (7, 1), (6, 1), (7, 1), (6, 4), (7, 4),
+                                                (3, 4), (4, 2)]
+    assert F.program_io(F.PROGRAM_KINDS) is None and F.program_io(-1) is None
+    assert F.program_io(F.MIXTURE_COHERENT, 4) == (7, 5)
+    assert F.program_io(F.MIXTURE_PDF, F.MIXTURE_MAX_WAVELENGTHS + 1) is None
     assert (F.PROGRAM_FORMAT, F.PROGRAM_HEADER_LEN) == (4, 8)
     assert F.PROGRAM_OPS[:3] == ('Input', 'Const', 'Add') and F.PROGRAM_OPS[-1] == 'EndIf'
     assert len(F.PROGRAM_OPS) == 32
@@ -544,9 +548,9 @@ def test_export_program_round_trip(entry):
                 continue
             assert a.dtype == np.float32 and a.ndim == 1
             assert a[0] == F.PROGRAM_FORMAT and a[5] == len(a)
-            assert (a[1], a[2]) == F.PROGRAM_IO[kind]
+            assert (a[1], a[2]) == F.program_io(kind)
             p = F.decode_program(a)
-            assert (p.n_inputs, len(p.outputs)) == F.PROGRAM_IO[kind]
+            assert (p.n_inputs, len(p.outputs)) == F.program_io(kind)
             code = [(op, float(a_) if op == F.PROGRAM_OPS.index('Const') else a_, b_, c_)
                     for op, a_, b_, c_ in p.code]
             back = _assemble(p.n_inputs, code, p.outputs, p.tables, p.params)
@@ -566,7 +570,7 @@ def test_export_program_round_trip(entry):
                 assert (a is not None) == spectral, (entry['name'], kind, n)
                 if a is not None:
                     io = [(6 + n, 1), (6 + n, 4), (3 + n, n + 1)][kind]
-                    assert (a[1], a[2]) == io and a[5] == len(a)
+                    assert (a[1], a[2]) == io == F.program_io(kind, n) and a[5] == len(a)
             for n in (0, F.MIXTURE_MAX_WAVELENGTHS + 1, -1):
                 assert b.export_mixture_program(kind, n) is None
         assert b.export_mixture_program(F.MIXTURE_KINDS, 4) is None
@@ -810,7 +814,7 @@ def test_programs_give_finite_zeros_for_bad_input(entry):
             a = b.export_program(kind)
             if a is None:
                 continue
-            n_in, _ = F.PROGRAM_IO[kind]
+            n_in, _ = F.program_io(kind)
             spectral = kind % 2 == 1
             rows, wi_bad = [], []
             for wi in bad_dirs + [ok_dir]:

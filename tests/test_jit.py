@@ -262,17 +262,10 @@ as_f32 = acc.as_f32
 # The core's programs: export (stam_brdf_export_program) and a numpy executor
 # ---------------------------------------------------------------------------
 
-# Kinds (STAM_PROGRAM_* of stam.h): name -> (code, inputs, outputs).
-PROGRAM_KINDS = {
-    'eval_rgb': (0, 6, 3),
-    'eval_spectral': (1, 7, 1),
-    'pdf_rgb': (2, 6, 1),
-    'pdf_spectral': (3, 7, 1),
-    'sample_rgb': (4, 6, 4),
-    'sample_spectral': (5, 7, 4),
-    'coherent_rgb': (6, 3, 4),
-    'coherent_spectral': (7, 4, 2),
-}
+# Kinds (STAM_PROGRAM_* of stam.h): name -> code.
+PROGRAM_KINDS = {name.lower(): getattr(stam_core, 'PROGRAM_' + name) for name in (
+    'EVAL_RGB', 'EVAL_SPECTRAL', 'PDF_RGB', 'PDF_SPECTRAL', 'SAMPLE_RGB', 'SAMPLE_SPECTRAL',
+    'COHERENT_RGB', 'COHERENT_SPECTRAL')}
 
 
 # Mixture kinds (STAM_MIXTURE_* of stam.h), over the 4 wavelengths of
@@ -286,23 +279,10 @@ def export_program(brdf, kind, at_built=False):
     stam_brdf_export_mixture_program over 4 wavelengths) for a
     stam_diffraction.core.Brdf, or None where the material has none
     (`at_built`: the kind's program for the built parameters)."""
+    flag = stam_core.PROGRAM_AT_BUILT if at_built else 0
     if kind in MIXTURE_KINDS:
-        flag = stam_core.PROGRAM_AT_BUILT if at_built else 0
         return brdf.export_mixture_program(MIXTURE_KINDS[kind] | flag, 4)
-    import ctypes
-    lib = stam_core.lib()
-    fn = lib.stam_brdf_export_program
-    fn.restype = ctypes.c_size_t
-    fn.argtypes = [ctypes.c_void_p, ctypes.c_uint32, ctypes.POINTER(ctypes.c_float),
-                   ctypes.c_size_t]
-    code = PROGRAM_KINDS[kind][0] | (stam_core.PROGRAM_AT_BUILT if at_built else 0)
-    n = int(fn(brdf._handle(), code, None, 0))
-    if n == 0:
-        return None
-    out = np.empty(n, dtype=np.float32)
-    assert int(fn(brdf._handle(), code, out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),
-                  n)) == n
-    return out
+    return brdf.export_program(PROGRAM_KINDS[kind] | flag)
 
 
 # Operation names of the core's programs (stam.h's STAM_OP_*, lower case).

@@ -105,6 +105,7 @@ if set(_KINDS) != set(_KIND_NAMES):
 #   SAMPLE_SPECTRAL   wi[3] u[3] lambda  -> wo[3], coherent
 #   COHERENT_RGB      wi[3]              -> coherent R, G, B, its probability
 #   COHERENT_SPECTRAL wi[3] lambda       -> coherent reflectance, probability
+# (program_io gives each kind's numbers of inputs and outputs.)
 PROGRAM_EVAL_RGB = _KINDS['EVAL_RGB']
 PROGRAM_EVAL_SPECTRAL = _KINDS['EVAL_SPECTRAL']
 PROGRAM_PDF_RGB = _KINDS['PDF_RGB']
@@ -117,11 +118,6 @@ PROGRAM_KINDS = _KINDS['KINDS']
 # Added to a kind: its program for a renderer that keeps every parameter at its
 # built value (no texture, no gradient); None where it is the plain program.
 PROGRAM_AT_BUILT = _KINDS['AT_BUILT']
-# (inputs, outputs) of each kind, indexed by its code (the table above).
-PROGRAM_IO = {PROGRAM_EVAL_RGB: (6, 3), PROGRAM_EVAL_SPECTRAL: (7, 1),
-              PROGRAM_PDF_RGB: (6, 1), PROGRAM_PDF_SPECTRAL: (7, 1),
-              PROGRAM_SAMPLE_RGB: (6, 4), PROGRAM_SAMPLE_SPECTRAL: (7, 4),
-              PROGRAM_COHERENT_RGB: (3, 4), PROGRAM_COHERENT_SPECTRAL: (4, 2)}
 
 # Mixture programs (STAM_MIXTURE_* of stam.h, read from it): a spectral
 # renderer's one-sample mixture over the N wavelengths of a path, each
@@ -212,6 +208,9 @@ def lib():
         'stam_brdf_memory_bytes': (sz, [vp]),
         'stam_brdf_export_program': (sz, [vp, ctypes.c_uint32, fp, sz]),
         'stam_brdf_export_mixture_program': (sz, [vp, ctypes.c_uint32, ctypes.c_uint32, fp, sz]),
+        'stam_program_io': (ctypes.c_int, [ctypes.c_uint32, ctypes.c_uint32,
+                                           ctypes.POINTER(ctypes.c_uint32),
+                                           ctypes.POINTER(ctypes.c_uint32)]),
         'stam_brdf_warnings': (ctypes.c_char_p, [vp]),
         'stam_brdf_params_json': (ctypes.c_char_p, [vp]),
         'stam_parameter_reference': (ctypes.c_char_p, []),
@@ -563,6 +562,19 @@ def _program_array(program):
     if v.ndim != 1:
         raise ValueError('stam_diffraction.core: a program is a 1-D array, not %s' % (v.shape,))
     return np.ascontiguousarray(v, dtype=np.float32)
+
+
+def program_io(kind, n_wavelengths=0):
+    """(inputs, outputs) of program kind `kind` (n_wavelengths 0: PROGRAM_*)
+    or of mixture kind `kind` over n_wavelengths (MIXTURE_*), as stam.h gives
+    them (stam_program_io); None for a kind or count that is not one."""
+    kind, n_wavelengths = operator.index(kind), operator.index(n_wavelengths)
+    if not (0 <= kind < 2 ** 32 and 0 <= n_wavelengths < 2 ** 32):
+        return None
+    n_in, n_out = ctypes.c_uint32(), ctypes.c_uint32()
+    if not lib().stam_program_io(kind, n_wavelengths, ctypes.byref(n_in), ctypes.byref(n_out)):
+        return None
+    return n_in.value, n_out.value
 
 
 def decode_program(array):

@@ -197,6 +197,13 @@ size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
 size_t stam_brdf_export_mixture_program(const StamBrdf *b, uint32_t kind, uint32_t n_wavelengths,
                                         float *out, size_t capacity);
 
+/* The numbers of inputs and outputs of program kind `kind` (STAM_PROGRAM_*,
+ * n_wavelengths 0: the tables above) or of mixture kind `kind`
+ * (STAM_MIXTURE_*) over n_wavelengths, written where the pointers are not
+ * NULL: what a host checks an exported program against. Returns 1, or 0
+ * (nothing written) for a kind or count that is not one. */
+int stam_program_io(uint32_t kind, uint32_t n_wavelengths, uint32_t *inputs, uint32_t *outputs);
+
 /* Material parameters a program reads through its parameter op (Param,
  * code 29): the array's parameter section lists (id, value) pairs, the
  * value the program was built with; a renderer may substitute its own

@@ -8,8 +8,8 @@
 mod program;
 
 pub use program::{
-    stam_param_name, stam_program_run, stam_program_run_f64, StamProgramElementary,
-    StamProgramRegion,
+    stam_param_name, stam_program_io, stam_program_run, stam_program_run_f64,
+    StamProgramElementary, StamProgramRegion,
 };
 
 use crate::material::params::{parameter_reference, resolved_json_text};

@@ -237,6 +237,37 @@ pub unsafe extern "C" fn stam_program_run_f64(
     run_caught(program, program_len, arrays, &mut hooks, err, err_len)
 }
 
+/// Writes the inputs and outputs of program kind `kind` (n_wavelengths 0)
+/// or of mixture kind `kind` over `n_wavelengths`; 0 for neither.
+///
+/// # Safety
+/// `inputs` and `outputs` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn stam_program_io(
+    kind: u32,
+    n_wavelengths: u32,
+    inputs: *mut u32,
+    outputs: *mut u32,
+) -> i32 {
+    use crate::material::program::{MixtureKind, ProgramKind, MAX_MIXTURE_WAVELENGTHS};
+    let n = n_wavelengths as usize;
+    let io = match n {
+        0 => ProgramKind::from_code(kind).map(ProgramKind::io),
+        _ if n <= MAX_MIXTURE_WAVELENGTHS => MixtureKind::from_code(kind).map(|k| k.io(n)),
+        _ => None,
+    };
+    let Some((n_in, n_out)) = io else {
+        return 0;
+    };
+    if !inputs.is_null() {
+        *inputs = n_in as u32;
+    }
+    if !outputs.is_null() {
+        *outputs = n_out as u32;
+    }
+    1
+}
+
 /// The name of parameter id `id` (STAM_PARAM_*), "" for none.
 #[no_mangle]
 pub extern "C" fn stam_param_name(id: u32) -> *const c_char {

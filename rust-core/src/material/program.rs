@@ -63,6 +63,20 @@ impl ProgramKind {
     pub fn spectral(self) -> bool {
         (self as u32) % 2 == 1
     }
+
+    /// The kind's (inputs, outputs): the table above (stam_program_io).
+    pub fn io(self) -> (usize, usize) {
+        let lambda = self.spectral() as usize;
+        match self {
+            ProgramKind::EvalRgb => (6, 3),
+            ProgramKind::EvalSpectral | ProgramKind::PdfRgb | ProgramKind::PdfSpectral => {
+                (6 + lambda, 1)
+            }
+            ProgramKind::SampleRgb | ProgramKind::SampleSpectral => (6 + lambda, 4),
+            ProgramKind::CoherentRgb => (3, 4),
+            ProgramKind::CoherentSpectral => (4, 2),
+        }
+    }
 }
 
 /// The programs of a spectral renderer's one-sample mixture over the N

@@ -56,6 +56,12 @@ fn every_material_exports_every_program() {
             let p = brdf
                 .program(kind)
                 .unwrap_or_else(|| panic!("{json} has no {kind:?} program"));
+            // The kind's inputs and outputs (stam_program_io).
+            assert_eq!(
+                (p.n_inputs as usize, p.outputs.len()),
+                kind.io(),
+                "{kind:?}"
+            );
             for bad in [f64::NAN, -1.0, 0.0] {
                 let mut inputs = vec![0.1, 0.2, bad];
                 inputs.resize(p.n_inputs as usize, bad);
@@ -238,6 +244,17 @@ fn mixture_programs_are_the_spectral_programs_mixed() {
                 mixture(MixtureKind::Sample),
                 mixture(MixtureKind::Coherent),
             );
+            for (p, kind) in [
+                (&pdf, MixtureKind::Pdf),
+                (&sample, MixtureKind::Sample),
+                (&coherent, MixtureKind::Coherent),
+            ] {
+                assert_eq!(
+                    (p.n_inputs as usize, p.outputs.len()),
+                    kind.io(n),
+                    "{kind:?} N {n}"
+                );
+            }
             for (trial, (wi, wo)) in crate::testing::programs::pairs(200, 5)
                 .into_iter()
                 .enumerate()

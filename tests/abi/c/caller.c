@@ -116,9 +116,22 @@ static int check_coherent_probability(const StamBrdf *b, const float *wi, const 
  * exists for every material (the JIT variants run nothing else); a kind
  * out of range and the NULL material give 0. */
 static int check_export_program(const StamBrdf *b, char *report, size_t report_len) {
-    /* Inputs and outputs of each kind, in the order of STAM_PROGRAM_*. */
-    static const size_t io[STAM_PROGRAM_KINDS][2] = {{6, 3}, {7, 1}, {6, 1}, {7, 1},
-                                                     {6, 4}, {7, 4}, {3, 4}, {4, 2}};
+    /* Inputs and outputs of each kind (stam_program_io: the header's
+     * table); none for a kind that is not one. */
+    uint32_t io[STAM_PROGRAM_KINDS][2];
+    for (uint32_t kind = 0; kind < STAM_PROGRAM_KINDS; ++kind)
+        CHECK(42, stam_program_io(kind, 0, &io[kind][0], &io[kind][1]) == 1,
+              "no inputs and outputs for kind %u", kind);
+    {
+        uint32_t in = 99, out = 99;
+        CHECK(42, stam_program_io(STAM_PROGRAM_KINDS, 0, &in, &out) == 0 && in == 99 &&
+                      stam_program_io(STAM_MIXTURE_KINDS, 4, &in, &out) == 0 &&
+                      stam_program_io(STAM_MIXTURE_PDF, STAM_MIXTURE_MAX_WAVELENGTHS + 1, NULL,
+                                      NULL) == 0 &&
+                      stam_program_io(STAM_MIXTURE_COHERENT, 4, &in, &out) == 1 && in == 7 &&
+                      out == 5,
+              "stam_program_io out of range, or the mixture's: %u %u", in, out);
+    }
     size_t exported = 0;
     CHECK(42, STAM_PROGRAM_EVAL_RGB == 0u && STAM_PROGRAM_COHERENT_SPECTRAL == 7u &&
                   STAM_PROGRAM_KINDS == 8u,

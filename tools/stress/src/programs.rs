@@ -24,17 +24,14 @@ use stam::spectrum::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 /// Number of program kinds (STAM_PROGRAM_KINDS).
 pub const KINDS: u32 = 8;
 
-/// (inputs, outputs) of each kind, in the order of STAM_PROGRAM_*.
-pub const IO: [(u32, usize); KINDS as usize] = [
-    (6, 3),
-    (7, 1),
-    (6, 1),
-    (7, 1),
-    (6, 4),
-    (7, 4),
-    (3, 4),
-    (4, 2),
-];
+/// (inputs, outputs) of program kind `kind` (n_wavelengths 0) or of a
+/// mixture kind over n_wavelengths, as stam.h gives them
+/// (stam_program_io); None for neither.
+pub fn io(kind: u32, n_wavelengths: u32) -> Option<(u32, usize)> {
+    let (mut n_in, mut n_out) = (0u32, 0u32);
+    let known = unsafe { stam::ffi::stam_program_io(kind, n_wavelengths, &mut n_in, &mut n_out) };
+    (known == 1).then_some((n_in, n_out as usize))
+}
 
 /// Names of the kinds, for messages.
 pub const NAMES: [&str; KINDS as usize] = [
@@ -126,7 +123,7 @@ pub fn decode_checked(kind: u32, array: &[f32]) -> Result<Program, String> {
         ));
     }
     let p = decode(array).ok_or_else(|| format!("{name}: the exported array does not decode"))?;
-    let (n_in, n_out) = IO[kind as usize];
+    let (n_in, n_out) = io(kind, 0).ok_or_else(|| format!("{name}: not a kind"))?;
     if p.n_inputs != n_in || p.outputs.len() != n_out {
         return Err(format!(
             "{name}: {} inputs and {} outputs, not {n_in} and {n_out}",
@@ -270,9 +267,8 @@ pub fn check_mixtures(
         return c;
     };
     let names = ["MIXTURE_PDF", "MIXTURE_SAMPLE", "MIXTURE_COHERENT"];
-    let io = [(10, 1), (10, 4), (7, 5)];
     for (k, p) in mixtures.iter().enumerate() {
-        if (p.n_inputs, p.outputs.len()) != io[k] {
+        if Some((p.n_inputs, p.outputs.len())) != io(k as u32, 4) {
             c.violations.push(format!(
                 "{}: inputs / outputs {:?}",
                 names[k],

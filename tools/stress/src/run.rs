@@ -933,12 +933,16 @@ fn check_programs(
             );
             return;
         }
+        let (mut n_in, mut n_out) = (0u32, 0u32);
+        let known = unsafe { ffi::stam_program_io(kind as u32, 4, &mut n_in, &mut n_out) };
         match stam::program::decode(&array) {
-            Some(p) => mixtures.push(p),
-            None => {
+            Some(p) if known == 1 && (p.n_inputs, p.outputs.len()) == (n_in, n_out as usize) => {
+                mixtures.push(p)
+            }
+            _ => {
                 return fail(
                     report,
-                    format!("mixture {kind:?}: the array does not decode"),
+                    format!("mixture {kind:?}: no decode, or not ({n_in}, {n_out})"),
                 )
             }
         }

@@ -322,7 +322,9 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
                 let mut array = vec![0.0f32; len];
                 stam_brdf_export_mixture_program(p, kind, 4, array.as_mut_ptr(), len);
                 let out_of_range =
-                    stam_brdf_export_mixture_program(p, kind, 0, std::ptr::null_mut(), 0);
+                    stam_brdf_export_mixture_program(p, kind, 0, std::ptr::null_mut(), 0)
+                        + stam_program_io(kind, 17, std::ptr::null_mut(), std::ptr::null_mut())
+                            as usize;
                 match stam::program::decode(&array) {
                     Some(program) if out_of_range == 0 => mixtures.push(program),
                     _ => {
