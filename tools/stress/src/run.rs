@@ -15,7 +15,8 @@
 //!   sample call identical to the combined call's sample;
 //! - the material's programs (stam_brdf_export_program): sized with NULL,
 //!   written whole, the Rust API's own program (`Brdf::program`, encoded)
-//!   bit for bit, every kind present, and each run on the batch's lanes
+//!   bit for bit, every kind present (EVAL_RGB but for gratings above
+//!   15 um: docs/parameters.md), and each run on the batch's lanes
 //!   with the
 //!   core's f32 executor under the contract of `crate::programs`;
 //! - every refused material has a non-empty message; the version string is
@@ -105,6 +106,9 @@ pub struct Report {
     /// Program contract violations (crate::programs, the export's sizes,
     /// the ABI's array against the Rust API's, a missing kind).
     pub bad_programs: u64,
+    /// Gratings above 15 um without an RGB eval program (docs/parameters.md:
+    /// the JIT RGB variants serve periods up to about 20 um).
+    pub coarse_gratings_without_rgb_eval: u64,
     pub seconds: f64,
     /// The first violations, for diagnosis.
     pub examples: Vec<String>,
@@ -243,6 +247,10 @@ impl Report {
             (
                 "  program contract violations",
                 self.bad_programs.to_string(),
+            ),
+            (
+                "  gratings above 15 um without an RGB eval",
+                self.coarse_gratings_without_rgb_eval.to_string(),
             ),
             (
                 "construction time (total, s)",
@@ -845,6 +853,14 @@ fn check_programs(
             decoded.push(None);
             continue;
         }
+        if n == 0 && kind == 0 && rust.is_none() && coarse_grating(json) {
+            // A grating coarser than the RGB eval's unrolled orders serve
+            // (docs/parameters.md, period_um: about 20 um) has no EVAL_RGB
+            // program, like the Rust API; the other kinds exist.
+            report.coarse_gratings_without_rgb_eval += 1;
+            decoded.push(None);
+            continue;
+        }
         if n == 0 {
             // Every kind exists for every material (the JIT variants run
             // nothing else)
@@ -1106,6 +1122,18 @@ fn rigorous_answers() -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// Whether the material is a grating of period above 15 um, where its RGB
+/// eval program may unroll more orders than it serves (MAX_RGB_ORDERS:
+/// about 20 um at the compact disc's coherence length; every grating of
+/// period up to 15 um must have one).
+fn coarse_grating(json: &str) -> bool {
+    let Ok(value) = serde_json::from_str::<serde_json::Value>(json) else {
+        return false;
+    };
+    let periodic = matches!(value["surface"].as_str(), Some("periodic" | "cd"));
+    periodic && value["period_um"].as_f64().is_some_and(|p| p > 15.0)
 }
 
 /// The textured parameters' plans (`stam_texture_plan`) of the material
