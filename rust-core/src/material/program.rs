@@ -12,8 +12,7 @@ use crate::models::{FactorMaker, FactorProgram};
 use crate::optics::program::{upper_direction, PairProgram, Vec3};
 use crate::program::{Builder, Mask, Program, Value};
 use crate::sampling::program::{cosine_density_program, cosine_direction_program};
-use crate::spectrum::{gamut_map_program, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
-use std::f64::consts::PI;
+use crate::spectrum::{gamut_map_program, wavenumber_per_um, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 
 /// The kinds of program a material exports (mirror STAM_PROGRAM_* in
 /// stam.h). Inputs / outputs:
@@ -221,7 +220,7 @@ impl Brdf {
                         .to_vec()
                 } else {
                     let (lambda, in_band) = band(b.input());
-                    let k = (2000.0 * PI) / lambda;
+                    let k = wavenumber_per_um(lambda);
                     let kernel = model.kernel_program_at(&b, &pair, k, lambda)?;
                     let f2 = self.fresnel.program(&b, pair.cos_half, lambda);
                     let mut f = f2 * pair.geometric_factor * kernel;

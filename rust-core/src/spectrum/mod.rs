@@ -51,10 +51,17 @@ pub const LAMBDA_MAX_NM: f64 = 830.0;
 pub const RGB_BAND_MIN_NM: f64 = 380.0;
 pub const RGB_BAND_MAX_NM: f64 = 780.0;
 
-/// Wavenumber k = 2 pi / lambda in 1/um.
+/// k lambda for k in 1/um and lambda in nm: 2 pi 1000.
+pub const WAVENUMBER_TIMES_NM: f64 = 2000.0 * PI;
+
+/// Wavenumber k = 2 pi / lambda in 1/um, of a wavelength in nm: natively
+/// (f64) and in a program (`program::Value`), the same division.
 #[inline]
-pub fn wavenumber_per_um(lambda_nm: f64) -> f64 {
-    2.0 * PI * 1000.0 / lambda_nm
+pub fn wavenumber_per_um<T>(lambda_nm: T) -> T
+where
+    f64: std::ops::Div<T, Output = T>,
+{
+    WAVENUMBER_TIMES_NM / lambda_nm
 }
 
 /// Whether lambda_nm lies in the visible band (where the BRDF is defined).

@@ -95,7 +95,7 @@ pub fn grating_lanes(period_um: f64, coherence_um: f64, n: usize, seed: u64) -> 
     while out.len() < n {
         let [a, b, c] = rng.three();
         let lambda = (380.0 + 400.0 * a) as f32 as f64;
-        let k = 2000.0 * std::f64::consts::PI / lambda;
+        let k = crate::spectrum::wavenumber_per_um(lambda);
         let wi = DVec3::new(1.6 * b - 0.8, 0.3 * c - 0.15, 0.0);
         let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
         let [d, e, f] = rng.three();

@@ -205,7 +205,7 @@ fn component_terms<'a>(
 ) -> Vec<Value<'a>> {
     let slope = 1.0 - 2.0 * f.inv_alpha;
     match lambda_nm {
-        Some(lambda) => vec![((2000.0 * PI) / lambda).ln() * slope],
+        Some(lambda) => vec![wavenumber_per_um(lambda).ln() * slope],
         None => rgb_sampling_nodes()
             .iter()
             .map(|&l| b.c(wavenumber_per_um(l).ln() * slope))

@@ -43,7 +43,7 @@ use crate::optics::program::{PairProgram, Vec3};
 use crate::program::lookup::bspline_weights;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
 use crate::sampling::program::{cosine_density_program, cosine_direction_program};
-use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+use crate::spectrum::{wavenumber_per_um, LAMBDA_MAX_NM, LAMBDA_MIN_NM, WAVENUMBER_TIMES_NM};
 use std::f64::consts::PI;
 
 /// Mirror roughness exponent below which the sampling lobe is the series'
@@ -267,7 +267,7 @@ impl FitTable {
         let b = Builder::at_built_values();
         let (cos_i, lambda) = (b.input(), b.input());
         let wi = [(1.0 - cos_i * cos_i).max(0.0).sqrt(), b.c(0.0), cos_i];
-        let k = (2000.0 * PI) / lambda;
+        let k = wavenumber_per_um(lambda);
         let a = k * model.sigma_times(&b, 2.0) * cos_i;
         let g0 = a * a;
         let series = g0.lt(SERIES_MAX_G);
@@ -466,7 +466,7 @@ impl Gaussian {
         lambda: Value<'a>,
     ) -> Value<'a> {
         let s = &self.surface;
-        let a = self.sigma_times(b, 2000.0 * PI * 2.0) / lambda * cos_i;
+        let a = self.sigma_times(b, WAVENUMBER_TIMES_NM * 2.0) / lambda * cos_i;
         let g0 = a * a;
         let mut p_coh = g0.gt(COHERENT_MAX_G).select(0.0, (-g0).exp());
         if s.isotropic {
@@ -565,7 +565,7 @@ impl Gaussian {
             }
         };
         let lambda = lambda_nm.unwrap_or_else(|| b.c(RGB_SAMPLING_NM));
-        let k = (2000.0 * PI) / lambda;
+        let k = wavenumber_per_um(lambda);
         let a = k * self.sigma_times(b, 2.0) * wi[2];
         let g0 = a * a;
         let series = g0.lt(SERIES_MAX_G);
@@ -830,7 +830,7 @@ impl SurfacePrograms for Gaussian {
         cos_i: Value<'a>,
         lambda_nm: Value<'a>,
     ) -> Option<Value<'a>> {
-        let k = (2000.0 * PI) / lambda_nm;
+        let k = wavenumber_per_um(lambda_nm);
         let sigma = b.param(ParamId::SigmaUm, self.surface.sigma_um);
         let a = k * (sigma * 2.0) * cos_i;
         let g = a * a;

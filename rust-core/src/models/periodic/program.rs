@@ -19,6 +19,7 @@ use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::special::sin_squared;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
+use crate::spectrum::WAVENUMBER_TIMES_NM;
 use std::f64::consts::PI;
 
 /// |c_n(beta)|^2 as program operations: the closed form of the rect
@@ -449,7 +450,7 @@ impl SurfacePrograms for Periodic {
         pair: &PairProgram<'a>,
         k_per_um: Value<'a>,
     ) -> Option<Value<'a>> {
-        let lambda_nm = (2000.0 * PI) / k_per_um;
+        let lambda_nm = WAVENUMBER_TIMES_NM / k_per_um;
         self.kernel_program_at(b, pair, k_per_um, lambda_nm)
     }
 

@@ -45,6 +45,7 @@ use crate::optics::program::Vec3;
 use crate::program::lookup::select_chain;
 use crate::program::{Builder, ParamId, Program, Table, Value};
 use crate::sampling::{band_density, DEFENSIVE_FRACTION, RGB_BAND_NM};
+use crate::spectrum::WAVENUMBER_TIMES_NM;
 use std::borrow::Cow;
 use std::f64::consts::{PI, SQRT_2};
 use std::sync::OnceLock;
@@ -225,7 +226,7 @@ impl Periodic {
         let one_plus_dot = wi[0] * x + wi[1] * y + wi[2] * z + 1.0;
         let w = wi[2] + z;
         let gw2 = (one_plus_dot * one_plus_dot / (wi[2] * z * w * w)).min(GW2_CAP);
-        let beta = -(2000.0 * PI) * w / lambda;
+        let beta = -WAVENUMBER_TIMES_NM * w / lambda;
         // A sine profile's table is read at the point's height (scaled
         // beta, as the evals read it), so that the orders' weights follow
         // it (a height texture's above all; one wavelength only: the RGB
@@ -253,7 +254,7 @@ impl Periodic {
 
     /// sigma / lambda (lambda in nm), for `sigma` and fixed wavelengths.
     fn sigma_per_nm(&self) -> f64 {
-        1.0 / (2000.0 * PI * SQRT_2 * self.surface.coherence_um)
+        1.0 / (WAVENUMBER_TIMES_NM * SQRT_2 * self.surface.coherence_um)
     }
 
     /// The orders, their probabilities and (RGB) band intervals at wi.

@@ -69,7 +69,7 @@ fn peak_rows(period_um: f64, coherence_um: f64, seed: u64) -> Vec<(DVec3, DVec3,
     while rows.len() < 3000 {
         let [a, b, c] = rng.three();
         let lambda = (380.0 + 400.0 * a) as f32 as f64;
-        let k = 2000.0 * PI / lambda;
+        let k = crate::spectrum::wavenumber_per_um(lambda);
         let wi = DVec3::new(1.6 * b - 0.8, 0.3 * c - 0.15, 0.0);
         let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
         let [d, e, f] = rng.three();
@@ -267,7 +267,7 @@ fn rgb_peak_pairs(period: f64, l: f64, seed: u64) -> Vec<(DVec3, DVec3)> {
         let wi = DVec3::new(wi.x, wi.y, (1.0 - wi.length_squared()).sqrt());
         let [d, e, f] = rng.three();
         let lambda = 380.0 + 400.0 * a;
-        let k = 2000.0 * PI / lambda;
+        let k = crate::spectrum::wavenumber_per_um(lambda);
         let n_max = (2.0 * period * 1000.0 / lambda) as i64;
         let n = if d < 0.2 {
             0.0

@@ -13,6 +13,7 @@ use crate::sampling::warps::{inverse_normal, pick, pick_cdf, uv_to_direction};
 use crate::sampling::{band_density, Component, Components, RGB_BAND_NM};
 use crate::special::fast_exp;
 use crate::spectrum::wavenumber_per_um;
+use crate::spectrum::WAVENUMBER_TIMES_NM;
 use glam::DVec3;
 use smallvec::smallvec;
 use std::f64::consts::PI;
@@ -132,7 +133,7 @@ pub struct RainbowLobe {
 /// The rainbow's Gaussian sd in u and v at lambda: 1 / (sqrt(2) k l) with
 /// k = 2 pi 1000 / lambda_nm.
 fn rainbow_sigma(lambda_nm: f64, coherence_um: f64) -> f64 {
-    lambda_nm / (2000.0 * PI * std::f64::consts::SQRT_2 * coherence_um)
+    lambda_nm / (WAVENUMBER_TIMES_NM * std::f64::consts::SQRT_2 * coherence_um)
 }
 
 impl RainbowLobe {
