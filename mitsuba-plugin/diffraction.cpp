@@ -421,7 +421,7 @@ public:
                 throw ParamError("give either 'fresnel' or 'eta'/'k', not both");
             if (has_k && !has_eta)
                 throw ParamError("parameter 'k' needs 'eta' (the complex index eta + i k; "
-                                 "eta in [0.001, 100])");
+                                 "eta in " + diffraction_detail::core_accepted("fresnel.eta") + ")");
 
             m_textures.attach(m_params);
             check_frame();

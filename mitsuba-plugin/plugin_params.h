@@ -280,6 +280,20 @@ inline void check_frame_params(double twist, double center_u, double center_v) {
         throw ParamError("parameters 'center_u' and 'center_v' must be finite");
 }
 
+/// What the core accepts for `key` of its parameter reference
+/// (stam_parameter_reference; "fresnel.eta": "[0.001, 100]"), for the
+/// plugin's messages; "" for a key it does not list
+inline std::string core_accepted(const std::string &key) {
+    static const JsonValue reference = parse_json(stam_parameter_reference());
+    if (const JsonValue *keys = reference.get("material"))
+        for (const JsonValue &k : keys->items) {
+            const JsonValue *name = k.get("key"), *accepted = k.get("accepted");
+            if (name && accepted && name->text == key)
+                return accepted->text;
+        }
+    return "";
+}
+
 /// `tracks`: true for "linear", false for "concentric"; ParamError else
 inline bool tracks_are_linear(const std::string &t) {
     if (t != "linear" && t != "concentric")

@@ -427,7 +427,7 @@ def test_metal_spellings():
 @pytest.mark.parametrize('params,name', [
     ({**CD, 'twist': 1e9}, 'twist'),
     ({**CD, 'twist': -361.0}, 'twist'),
-    ({**CD, 'k': 3.0}, "'k' needs 'eta'"),
+    ({**CD, 'k': 3.0}, "'k' needs 'eta' (the complex index eta + i k; eta in [0.001, 100])"),
     ({**CD, 'tracks': 'radial'}, 'tracks'),
 ])
 def test_plugin_parameters_refused_by_name(params, name):
