@@ -5,6 +5,8 @@
 //! metal's measured spectral index (tabulated, linear in wavelength).
 
 use super::metals::{MetalTable, METALS};
+use crate::program::Real;
+use std::ops::Sub;
 
 #[derive(Clone)]
 pub enum Fresnel {
@@ -483,42 +485,18 @@ pub fn metal_index(table: &MetalTable, lambda_nm: f64) -> (f64, f64) {
 }
 
 /// Unpolarised Fresnel reflectance of a conductor with index eta + i k
-/// (k = 0: a dielectric seen from outside), in real arithmetic.
+/// (k = 0: a dielectric seen from outside), in real arithmetic, written
+/// once for native code (f64) and programs (`Value`: eta and k the
+/// material's `Op::Param`s, which a renderer can differentiate; the formula
+/// is smooth in both away from the clamps at 0 and 1, which a physical
+/// index never reaches). A cosine that is not finite reads as 0 (grazing,
+/// where r is 1); r that is not finite (a NaN index) as 1.
 #[inline]
-pub fn conductor_reflectance(cos_theta: f64, eta: f64, k: f64) -> f64 {
-    let c = cos_theta.clamp(0.0, 1.0);
-    let c2 = c * c;
-    let s2 = 1.0 - c2;
-    let eta2 = eta * eta;
-    let k2 = k * k;
-    let t0 = eta2 - k2 - s2;
-    let a2_plus_b2 = (t0 * t0 + 4.0 * eta2 * k2).sqrt();
-    let a = (0.5 * (a2_plus_b2 + t0)).max(0.0).sqrt();
-    let t1 = a2_plus_b2 + c2;
-    let t2 = 2.0 * a * c;
-    let rs = (t1 - t2) / (t1 + t2);
-    let t3 = c2 * a2_plus_b2 + s2 * s2;
-    let t4 = t2 * s2;
-    let rp = rs * (t3 - t4) / (t3 + t4);
-    let r = 0.5 * (rs + rp);
-    if r.is_finite() {
-        r.clamp(0.0, 1.0)
-    } else {
-        1.0
-    }
-}
-
-/// `conductor_reflectance` as program operations (crate::program), with
-/// eta and k as registers (the material's `Op::Param`s, so that a renderer
-/// can differentiate them; the formula is smooth in both away from the
-/// clamps at 0 and 1, which a physical index never reaches).
-pub fn conductor_reflectance_program<'a>(
-    b: &'a crate::program::Builder,
-    cos_theta: crate::program::Value<'a>,
-    eta: crate::program::Value<'a>,
-    k: crate::program::Value<'a>,
-) -> crate::program::Value<'a> {
-    let c = cos_theta.finite().select(cos_theta, 0.0).clamp(0.0, 1.0);
+pub fn conductor_reflectance<T: Real>(cos_theta: T, eta: T, k: T) -> T
+where
+    f64: Sub<T, Output = T>,
+{
+    let c = T::select(cos_theta.finite(), cos_theta, cos_theta.constant(0.0)).clamp(0.0, 1.0);
     let c2 = c * c;
     let s2 = 1.0 - c2;
     let (eta2, k2) = (eta * eta, k * k);
@@ -532,7 +510,7 @@ pub fn conductor_reflectance_program<'a>(
     let t4 = t2 * s2;
     let rp = rs * (t3 - t4) / (t3 + t4);
     let r = (rs + rp) * 0.5;
-    r.finite().select(r.clamp(0.0, 1.0), b.c(1.0))
+    T::select(r.finite(), r.clamp(0.0, 1.0), r.constant(1.0))
 }
 
 #[cfg(test)]
@@ -548,6 +526,48 @@ mod tests {
         let rs = (cos_i - n * cos_t) / (cos_i + n * cos_t);
         let rp = (n * cos_i - cos_t) / (n * cos_i + cos_t);
         0.5 * (rs.norm_sqr() + rp.norm_sqr())
+    }
+
+    /// Written once (`Real`): the program built from the formula and run
+    /// in f64 gives the native values bit for bit, NaN and out-of-range
+    /// cosines included.
+    #[test]
+    fn conductor_program_is_the_native_formula() {
+        use crate::program::Builder;
+        let b = Builder::new();
+        let (cos, eta, k) = (b.input(), b.input(), b.input());
+        let program = b.finish(&[conductor_reflectance(cos, eta, k)]);
+        let cosines = [
+            -0.5,
+            0.0,
+            1e-9,
+            0.01,
+            0.3,
+            0.7,
+            0.99,
+            1.0,
+            1.5,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        for &(eta, k) in &[
+            (1.5, 0.0),
+            (0.2, 3.9),
+            (1.1, 6.7),
+            (2.5, 0.3),
+            (1e-3, 100.0),
+            (f64::NAN, 1.0),
+        ] {
+            for &c in &cosines {
+                let native = conductor_reflectance(c, eta, k);
+                let run = program.run(&[c, eta, k])[0];
+                assert_eq!(
+                    native.to_bits(),
+                    run.to_bits(),
+                    "cos {c} eta {eta} k {k}: {native} {run}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! lookups as `fresnel::Fresnel::reflectance`, for a renderer's traced
 //! kernels. Knows no surface model.
 
-use super::fresnel::{conductor_reflectance_program, Fresnel};
+use super::fresnel::{conductor_reflectance, Fresnel};
 use super::geometry::MIN_COS;
 use crate::program::lookup::catmull_rom_weights;
 use crate::program::{Builder, Mask, ParamId, Value};
@@ -106,7 +106,7 @@ impl Fresnel {
             Fresnel::Constant(r) => b.param(ParamId::Fresnel, *r),
             Fresnel::ComplexIndex { eta, k } => {
                 let (eta, k) = (b.param(ParamId::Eta, *eta), b.param(ParamId::K, *k));
-                conductor_reflectance_program(b, cos, eta, k)
+                conductor_reflectance(cos, eta, k)
             }
             Fresnel::Metal { .. } => self.grid_program(b, cos, lambda_nm),
         }

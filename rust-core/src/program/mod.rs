@@ -21,6 +21,7 @@ mod builder;
 mod encode;
 mod interpret;
 pub mod lookup;
+mod real;
 pub mod special;
 #[cfg(test)]
 mod tests;
@@ -29,6 +30,7 @@ pub use batch::{BatchHooks, NoHooks, BATCH_LANES};
 pub use builder::{Builder, Mask, Table, Value};
 pub use encode::{decode, decode_checked, FORMAT, HEADER_LEN};
 pub use interpret::Lane;
+pub use real::Real;
 
 /// Operation codes (the plugin's executor mirrors them: program.h).
 #[repr(u32)]
