@@ -39,7 +39,7 @@
 use super::Brdf;
 use crate::models::{EnergyHint, FactorProgram};
 use crate::optics::program::Vec3;
-use crate::program::{lookup, Builder, ParamId, Table, Value};
+use crate::program::{lookup, Builder, ParamId, Real, Table, Value};
 use crate::sampling::warps::radical_inverse;
 use crate::sampling::SplitMix64;
 use glam::DVec3;
@@ -48,17 +48,18 @@ use std::f64::consts::PI;
 
 /// The horizon taper at a direction's cosine: 1 from `from_cos` on, below
 /// it t = 3 x^2 - 2 x^3 with x = cos / from_cos, smoothly to 0 (t / cos
-/// stays bounded).
+/// stays bounded); 0 at and below the horizon and for NaN. Written once
+/// for native code and programs (`Real`).
 #[inline]
-pub fn horizon_taper(cos: f64, from_cos: f64) -> f64 {
-    if cos >= from_cos {
-        1.0
-    } else if cos > 0.0 {
-        let x = cos / from_cos;
-        x * x * (3.0 - 2.0 * x)
-    } else {
-        0.0
-    }
+pub fn horizon_taper<T: Real>(cos: T, from_cos: f64) -> T
+where
+    f64: std::ops::Sub<T, Output = T>,
+{
+    let x = cos * (1.0 / from_cos);
+    let inside = x * x * (3.0 - x * 2.0);
+    let above = cos.ge(from_cos);
+    let below = T::select(cos.gt(0.0), inside, cos.constant(0.0));
+    T::select(above, cos.constant(1.0), below)
 }
 
 /// Cells in s = sqrt(cos theta).
@@ -758,10 +759,7 @@ impl EnergyTable {
 
     /// The horizon taper at a cosine.
     fn taper_program<'a>(&self, cos: Value<'a>) -> Value<'a> {
-        let x = cos * (1.0 / self.taper_cos);
-        let inside = x * x * (3.0 - x * 2.0);
-        cos.ge(self.taper_cos)
-            .select(1.0, cos.gt(0.0).select(inside, 0.0))
+        horizon_taper(cos, self.taper_cos)
     }
 }
 

@@ -31,6 +31,10 @@ pub trait Real:
     fn clamp(self, lo: f64, hi: f64) -> Self;
     /// Neither NaN nor infinite.
     fn finite(self) -> Self::Mask;
+    /// self > x (false for NaN).
+    fn gt(self, x: f64) -> Self::Mask;
+    /// self >= x (false for NaN).
+    fn ge(self, x: f64) -> Self::Mask;
     /// `a` where `mask` holds, else `b`.
     fn select(mask: Self::Mask, a: Self, b: Self) -> Self;
 }
@@ -51,6 +55,12 @@ impl Real for f64 {
     }
     fn finite(self) -> bool {
         self.is_finite()
+    }
+    fn gt(self, x: f64) -> bool {
+        self > x
+    }
+    fn ge(self, x: f64) -> bool {
+        self >= x
     }
     fn select(mask: bool, a: f64, b: f64) -> f64 {
         if mask {
@@ -77,6 +87,12 @@ impl<'a> Real for Value<'a> {
     }
     fn finite(self) -> Mask<'a> {
         Value::finite(self)
+    }
+    fn gt(self, x: f64) -> Mask<'a> {
+        Value::gt(self, x)
+    }
+    fn ge(self, x: f64) -> Mask<'a> {
+        Value::ge(self, x)
     }
     fn select(mask: Mask<'a>, a: Value<'a>, b: Value<'a>) -> Value<'a> {
         mask.select(a, b)
