@@ -52,16 +52,26 @@ fn err(msg: String) -> StamError {
     StamError::new(msg)
 }
 
+/// The JSON object of a material's parameters, or why `text` is not one.
+pub(crate) fn json_object(text: &str) -> Result<Map<String, Value>, StamError> {
+    let value: Value = serde_json::from_str(text)
+        .map_err(|e| err(format!("parameters are not valid JSON: {e}")))?;
+    match value {
+        Value::Object(obj) => Ok(obj),
+        other => Err(err(format!(
+            "parameters must be a JSON object, got {}",
+            type_name(&other)
+        ))),
+    }
+}
+
 impl MaterialParams {
     pub fn from_json(text: &str) -> Result<MaterialParams, StamError> {
-        let value: Value = serde_json::from_str(text)
-            .map_err(|e| err(format!("parameters are not valid JSON: {e}")))?;
-        let Value::Object(obj) = &value else {
-            return Err(err(format!(
-                "parameters must be a JSON object, got {}",
-                type_name(&value)
-            )));
-        };
+        Self::from_object(&json_object(text)?)
+    }
+
+    /// The parameters of a JSON object (`from_json` after parsing).
+    pub fn from_object(obj: &Map<String, Value>) -> Result<MaterialParams, StamError> {
         let surface = SurfaceParams::parse(obj, &MATERIAL_KEYS)?;
         let fresnel = parse_fresnel(obj.get("fresnel"))?;
         // A sigma texture's material has no one sigma to build the energy

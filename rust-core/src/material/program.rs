@@ -186,12 +186,9 @@ impl Brdf {
                 | ProgramKind::CoherentRgb
                 | ProgramKind::CoherentSpectral
         );
-        let energy = self.energy_table().filter(|_| with_energy && scales);
-        let derivatives = match energy {
-            Some(_) if !b.at_built() => self.derivatives_read_by(kind),
-            _ => Vec::new(),
-        };
-        let energy = energy.map(|e| e.program(&b, &derivatives));
+        let energy = (with_energy && scales)
+            .then(|| self.energy_program(&b, kind))
+            .flatten();
         let energy = energy.as_ref();
         let per_wavelength = energy.filter(|e| !e.colour_neutral());
         let model = self.surface.programs();
@@ -415,8 +412,7 @@ impl Brdf {
                 let (wi, ok_i) = upper_direction(&b, input3(&b));
                 let mirror = [-wi[0], -wi[1], wi[2]];
                 let lambdas: Vec<Value> = (0..n).map(|_| b.input()).collect();
-                let energy_table = self.energy_table();
-                let energy = energy_table.map(|e| e.program(&b, &self.coherent_derivatives(&b)));
+                let energy = self.energy_program(&b, ProgramKind::CoherentSpectral);
                 let mut out = Vec::with_capacity(n + 1);
                 let mut p_sum = b.c(0.0);
                 for raw in lambdas {
@@ -433,12 +429,20 @@ impl Brdf {
         Some(b.finish(&outputs))
     }
 
-    /// The energy table's derivatives the coherent spectral program reads.
-    fn coherent_derivatives(&self, b: &Builder) -> Vec<&TableDerivative> {
-        match b.at_built() {
+    /// The energy table in the program of `kind` (None without one), with
+    /// its derivatives along the parameters the model's part of that kind
+    /// reads (none for a program run at the built parameters).
+    fn energy_program<'a>(
+        &'a self,
+        b: &'a Builder,
+        kind: ProgramKind,
+    ) -> Option<super::energy::TableProgram<'a>> {
+        let table = self.energy_table()?;
+        let derivatives = match b.at_built() {
             true => Vec::new(),
-            false => self.derivatives_read_by(ProgramKind::CoherentSpectral),
-        }
+            false => self.derivatives_read_by(kind),
+        };
+        Some(table.program(b, &derivatives))
     }
 
     /// The energy table's derivatives along the parameters that the

@@ -7,7 +7,7 @@
 
 use serde_json::{json, Map, Value};
 
-use super::params::MaterialParams;
+use super::params::{json_object, MaterialParams};
 use crate::error::StamError;
 use crate::models::periodic::params::range::HEIGHT_UM;
 use crate::models::SurfaceParams;
@@ -70,34 +70,19 @@ pub fn texture_plan(
             "parameter '{name}': the texture's largest value is {largest}; it must be positive somewhere"
         )));
     }
-    let given: Map<String, Value> = match serde_json::from_str(params_json) {
-        Ok(Value::Object(obj)) => obj,
-        Ok(other) => {
-            return Err(StamError::new(format!(
-                "parameters must be a JSON object, got {}",
-                crate::json::type_name(&other)
-            )))
-        }
-        Err(e) => {
-            return Err(StamError::new(format!(
-                "parameters are not valid JSON: {e}"
-            )))
-        }
-    };
+    let given = json_object(params_json)?;
     let parse = |extra: &Map<String, Value>| {
         let mut obj = given.clone();
         obj.extend(extra.clone());
-        MaterialParams::from_json(&Value::Object(obj).to_string())
+        MaterialParams::from_object(&obj)
     };
     // The material as if the largest value were given as a number; where
     // that is refused, the material without the key tells whether the
     // texture is out of place (then that is the message) or its value is.
     // (A given bound below the largest value clamps the texture.)
     let bound_key = format!("{name}_max");
-    let probe = given
-        .get(&bound_key)
-        .and_then(Value::as_f64)
-        .map_or(largest, |bound| largest.min(bound));
+    let given_bound = given.get(&bound_key).and_then(Value::as_f64);
+    let probe = given_bound.map_or(largest, |bound| largest.min(bound));
     let out_of_place = StamError::new(format!("parameter '{name}' takes a texture {scope}"));
     let surface = match parse(&Map::from_iter([(name.to_string(), json!(probe))])) {
         Ok(p) => p.surface,
@@ -118,7 +103,7 @@ pub fn texture_plan(
     let rect =
         matches!(&surface, SurfaceParams::Periodic(p) if matches!(p.profile, Profile::Rect { .. }));
     let mut add = Map::new();
-    let max = match (rect, given.get(&bound_key).and_then(Value::as_f64)) {
+    let max = match (rect, given_bound) {
         (true, _) => largest,
         (false, Some(bound)) => bound,
         (false, None) => {
@@ -130,8 +115,10 @@ pub fn texture_plan(
         ParamId::SigmaUm => SIGMA_FLOOR_UM,
         _ => 0.0,
     };
+    // The parameter itself is at least SIGMA_FLOOR_UM (the core refuses a
+    // zero sigma or height).
     let value = if mean.is_finite() && mean > 0.0 {
-        mean.clamp(floor.max(SIGMA_FLOOR_UM), max.max(SIGMA_FLOOR_UM))
+        mean.clamp(SIGMA_FLOOR_UM, max.max(SIGMA_FLOOR_UM))
     } else {
         max
     };
