@@ -171,9 +171,11 @@ impl Brdf {
     /// for a conserving material (what tells which parameters the model's
     /// own part reads).
     fn program_with(&self, kind: ProgramKind, b: Builder, with_energy: bool) -> Option<Program> {
-        // A model with its own f (rigorous gratings) has no programs yet:
-        // the JIT variants refuse it, the scalar ones render it.
-        if self.surface.is_unfactored() {
+        // A model with its own f (rigorous gratings): f is the model's,
+        // with no Fresnel, G or energy factor; spectral programs only (the
+        // JIT RGB variants refuse it), where the model has them.
+        let unfactored = self.surface.is_unfactored();
+        if unfactored && !(kind.spectral() && self.surface.programs().unfactored_programs()) {
             return None;
         }
         // Only the reflectance kinds scale by the energy table (sampling
@@ -218,6 +220,10 @@ impl Brdf {
                 } else {
                     let (lambda, in_band) = band(b.input());
                     let k = wavenumber_per_um(lambda);
+                    if unfactored {
+                        let f = model.unfactored_spectral_program(&b, &pair, k, lambda)?;
+                        return Some(b.finish(&[(pair.valid & in_band).select(f, 0.0)]));
+                    }
                     let kernel = model.kernel_program_at(&b, &pair, k, lambda)?;
                     let f2 = self.fresnel.program(&b, pair.cos_half, lambda);
                     let mut f = f2 * pair.geometric_factor * kernel;
@@ -374,7 +380,10 @@ impl Brdf {
     }
 
     fn mixture_program_with(&self, kind: MixtureKind, n: usize, b: Builder) -> Option<Program> {
-        if self.surface.is_unfactored() || !(1..=MAX_MIXTURE_WAVELENGTHS).contains(&n) {
+        let unfactored = self.surface.is_unfactored();
+        if (unfactored && !self.surface.programs().unfactored_programs())
+            || !(1..=MAX_MIXTURE_WAVELENGTHS).contains(&n)
+        {
             return None;
         }
         let scale = 1.0 / n as f64;

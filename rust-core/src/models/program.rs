@@ -63,6 +63,25 @@ pub trait SurfacePrograms {
         self.kernel_program(b, pair, k_per_um)
     }
 
+    /// Whether a model with its own f has programs (`unfactored_spectral_program`
+    /// and its sampling); models whose f factors keep false.
+    fn unfactored_programs(&self) -> bool {
+        false
+    }
+
+    /// f itself at wavenumber k (from the in-band `lambda_nm`) for a model
+    /// with its own f (`SurfaceModel::unfactored_spectral`: no Fresnel, G
+    /// or energy factor); None where it has no program.
+    fn unfactored_spectral_program<'a>(
+        &self,
+        _b: &'a Builder,
+        _pair: &PairProgram<'a>,
+        _k_per_um: Value<'a>,
+        _lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        None
+    }
+
     /// `reflectance_rgb`: F^2 K integrated against the linear sRGB
     /// matching functions (f / G), before gamut mapping; with `factor`
     /// (the material's per-wavelength energy scaling, made by `factor`)

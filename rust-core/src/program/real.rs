@@ -28,13 +28,21 @@ pub trait Real:
     fn constant(self, x: f64) -> Self;
     fn sqrt(self) -> Self;
     fn max(self, other: f64) -> Self;
+    fn min(self, other: f64) -> Self;
     fn clamp(self, lo: f64, hi: f64) -> Self;
+    fn abs(self) -> Self;
+    fn floor(self) -> Self;
+    fn atan2(self, x: Self) -> Self;
     /// Neither NaN nor infinite.
     fn finite(self) -> Self::Mask;
     /// self > x (false for NaN).
     fn gt(self, x: f64) -> Self::Mask;
     /// self >= x (false for NaN).
     fn ge(self, x: f64) -> Self::Mask;
+    /// self < x (false for NaN).
+    fn lt(self, x: f64) -> Self::Mask;
+    /// self <= x (false for NaN).
+    fn le(self, x: f64) -> Self::Mask;
     /// `a` where `mask` holds, else `b`.
     fn select(mask: Self::Mask, a: Self, b: Self) -> Self;
 }
@@ -50,8 +58,20 @@ impl Real for f64 {
     fn max(self, other: f64) -> f64 {
         f64::max(self, other)
     }
+    fn min(self, other: f64) -> f64 {
+        f64::min(self, other)
+    }
     fn clamp(self, lo: f64, hi: f64) -> f64 {
         f64::clamp(self, lo, hi)
+    }
+    fn abs(self) -> f64 {
+        f64::abs(self)
+    }
+    fn floor(self) -> f64 {
+        f64::floor(self)
+    }
+    fn atan2(self, x: f64) -> f64 {
+        f64::atan2(self, x)
     }
     fn finite(self) -> bool {
         self.is_finite()
@@ -61,6 +81,12 @@ impl Real for f64 {
     }
     fn ge(self, x: f64) -> bool {
         self >= x
+    }
+    fn lt(self, x: f64) -> bool {
+        self < x
+    }
+    fn le(self, x: f64) -> bool {
+        self <= x
     }
     fn select(mask: bool, a: f64, b: f64) -> f64 {
         if mask {
@@ -82,8 +108,20 @@ impl<'a> Real for Value<'a> {
     fn max(self, other: f64) -> Value<'a> {
         Value::max(self, other)
     }
+    fn min(self, other: f64) -> Value<'a> {
+        Value::min(self, other)
+    }
     fn clamp(self, lo: f64, hi: f64) -> Value<'a> {
         Value::clamp(self, lo, hi)
+    }
+    fn abs(self) -> Value<'a> {
+        Value::abs(self)
+    }
+    fn floor(self) -> Value<'a> {
+        Value::floor(self)
+    }
+    fn atan2(self, x: Value<'a>) -> Value<'a> {
+        Value::atan2(self, x)
     }
     fn finite(self) -> Mask<'a> {
         Value::finite(self)
@@ -93,6 +131,12 @@ impl<'a> Real for Value<'a> {
     }
     fn ge(self, x: f64) -> Mask<'a> {
         Value::ge(self, x)
+    }
+    fn lt(self, x: f64) -> Mask<'a> {
+        Value::lt(self, x)
+    }
+    fn le(self, x: f64) -> Mask<'a> {
+        Value::le(self, x)
     }
     fn select(mask: Mask<'a>, a: Value<'a>, b: Value<'a>) -> Value<'a> {
         mask.select(a, b)

@@ -60,6 +60,7 @@ mod program_sampling;
 mod program_tests;
 mod rgb;
 pub mod rigorous;
+mod rigorous_grid;
 #[cfg(test)]
 mod rigorous_tests;
 mod sampling;

@@ -12,10 +12,12 @@
 //! - No coherent lobe (order 0 is a Gaussian lobe like the others): the
 //!   trait's zero defaults are the native values.
 
+use super::rigorous::RigorousOrders;
 use super::{
     Model, Periodic, PeriodicSurface, Profile, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT,
 };
 use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
+use crate::optics::fresnel::conductor_reflectance;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::special::sin_squared;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
@@ -295,7 +297,62 @@ impl PeriodicSurface {
         lambda_nm: Value<'a>,
     ) -> Value<'a> {
         let w = pair.w;
-        let period = b.param(ParamId::PeriodUm, self.period_um);
+        let sum = self.order_sum_program(b, pair, k, lambda_nm, true, |period| {
+            let beta = k * w;
+            let profile = self.profile_program(b, period);
+            let at = match profile {
+                ProfileProgram::Rect { .. } => None,
+                ProfileProgram::Scaled(_) => Some(powers.at(b, profile.scaled_beta(beta))),
+            };
+            // The rect profile's s^2: one beta for every order
+            let s2 = match profile {
+                ProfileProgram::Rect { height, .. } => Some(rect_s2(beta, height)),
+                ProfileProgram::Scaled(_) => None,
+            };
+            move |n| match (profile, &at, s2) {
+                (ProfileProgram::Rect { fill, .. }, _, Some(s2)) => {
+                    RectOrder::new(fill, n).power(s2)
+                }
+                (_, Some(at), _) => powers.power(b, at, n),
+                _ => unreachable!("the powers are prepared for the profile"),
+            }
+        });
+        let OrderSum { sum, l, e_v, x } = sum;
+        let kernel = (k * l / w).sq() * (1.0 / PI) * sum;
+        let ok = k.gt(0.0) & w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
+        ok.select(kernel.finite_non_negative(), 0.0)
+    }
+
+    /// sum over the orders near the pair of power(n) exp(-E_n) as the
+    /// kernels take it (`gaussian_sum`; see `OrderSum`). `powers` is given
+    /// the period (a parameter where `period_param`, else the built value)
+    /// and returns each order's power.
+    ///
+    /// The period and the coherence length are the program's parameters
+    /// (`Op::Param`): a renderer may change them (and differentiate). The
+    /// period as P = p_hi + p_lo: p_hi the built period's f32 value (a
+    /// constant), p_lo the built value's f64 residual plus the parameter's
+    /// change from its f32 value (exactly 0 at the build, in f32, and
+    /// carrying the derivative). The orders' count and the reach that picks
+    /// them stay the built ones: an order they miss after a change of a few
+    /// percent is beyond KERNEL_TAIL_EXPONENT. Each order's Gaussian
+    /// exponent comes from u P - n lambda (P the period in nm) with the
+    /// product's rounding error carried, so that the distance to a narrow
+    /// peak keeps f32's relative precision at high orders.
+    fn order_sum_program<'a, P: Fn(Value<'a>) -> Value<'a>>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        k: Value<'a>,
+        lambda_nm: Value<'a>,
+        period_param: bool,
+        powers: impl FnOnce(Value<'a>) -> P,
+    ) -> OrderSum<'a> {
+        let period = if period_param {
+            b.param(ParamId::PeriodUm, self.period_um)
+        } else {
+            b.built(self.period_um)
+        };
         let l = b.param(ParamId::CoherenceUm, self.coherence_um);
         // The built period's values as built constants (`Builder::built`):
         // a rebuild for a nearby period keeps the code.
@@ -322,37 +379,63 @@ impl PeriodicSurface {
         let e_v = (k * (v + v_lo) * l).sq();
         // l (k u - 2 pi n / Lam) = A (u P - n lambda) / lambda.
         let a = l * (2.0 * PI) / period;
-        let beta = k * w;
-        let profile = self.profile_program(b, period);
-        let at = match profile {
-            ProfileProgram::Rect { .. } => None,
-            ProfileProgram::Scaled(_) => Some(powers.at(b, profile.scaled_beta(beta))),
-        };
-        // The rect profile's s^2: one beta for every order
-        let s2 = match profile {
-            ProfileProgram::Rect { height, .. } => Some(rect_s2(beta, height)),
-            ProfileProgram::Scaled(_) => None,
-        };
+        let power = powers(period);
         let mut sum = b.c(0.0);
         for i in 0..self.max_orders_near(b) {
             let n = lo + i as f64;
             let d = (n.fma(-lambda_nm, p) + p_err) * inv_lambda * a;
             let e = d.fma(d, e_v);
-            let power = match (profile, &at, s2) {
-                (ProfileProgram::Rect { fill, .. }, _, Some(s2)) => {
-                    RectOrder::new(fill, n).power(s2)
-                }
-                (_, Some(at), _) => powers.power(b, at, n),
-                _ => unreachable!("the powers are prepared for the profile"),
-            };
-            let term = power * (-e).exp();
+            let term = power(n) * (-e).exp();
             let take = n.le(hi) & e.lt(EXP_UNDERFLOW);
             sum = sum + take.select(term, 0.0);
         }
-        let kernel = (k * l / w).sq() * (1.0 / PI) * sum;
-        let ok = k.gt(0.0) & w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
-        ok.select(kernel.finite_non_negative(), 0.0)
+        OrderSum { sum, l, e_v, x }
     }
+}
+
+impl PeriodicSurface {
+    /// `kernel_given` with the powers of rigorous orders (rigorous.rs):
+    /// sum_n eta_n (k^2 l^2 / pi) exp(-E_n) times what the cover lets
+    /// through, each eta_n read from the orders' pair grid
+    /// (rigorous_grid.rs) at the pair's (c, ky).
+    pub(super) fn rigorous_program<'a>(
+        &self,
+        b: &'a Builder,
+        orders: &RigorousOrders,
+        pair: &PairProgram<'a>,
+        k: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let grid = orders.pair_grid()?;
+        let table = b.table(grid.values.clone());
+        let (wi, wo) = (pair.wi, pair.wo);
+        // The period is no parameter here: the efficiencies, tabulated
+        // for the built grating, would not follow it (no gradient along
+        // it rather than a wrong one; the coherence length's is exact).
+        let sum = self.order_sum_program(b, pair, k, lambda_nm, false, |_| {
+            let place = grid.place(lambda_nm, (wo[0] - wi[0]) * 0.5, (wi[1] - wo[1]) * 0.5);
+            move |n| grid.read_at(&place, n, |i| b.gather(table, i))
+        });
+        let OrderSum { sum, l, e_v, x } = sum;
+        let mut f = (k * l).sq() * (1.0 / PI) * sum;
+        if orders.has_cover() {
+            let eta = orders.cover_eta();
+            let through = |cos: Value<'a>| -conductor_reflectance(cos, b.c(eta), b.c(0.0)) + 1.0;
+            f = f * through(wi[2]) * through(wo[2]);
+        }
+        let ok = k.gt(0.0) & pair.w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
+        Some(ok.select(f.finite_non_negative(), 0.0))
+    }
+}
+
+/// `order_sum_program`'s sum, with what its callers test: the coherence
+/// length l, the exponent across the grooves e_v (the sum is 0 from
+/// EXP_UNDERFLOW) and the order place x (finite where the pair has one).
+pub(super) struct OrderSum<'a> {
+    sum: Value<'a>,
+    l: Value<'a>,
+    e_v: Value<'a>,
+    x: Value<'a>,
 }
 
 /// The profile's parameters as the spectral kernel reads them (`Op::Param`):
@@ -466,6 +549,26 @@ impl SurfacePrograms for Periodic {
             self.surface
                 .kernel_program(b, &powers, pair, k_per_um, lambda_nm),
         )
+    }
+
+    /// Rigorous orders without a cover (whose mirror lobe the sampling
+    /// programs do not draw yet), where their pair grid is not too large.
+    fn unfactored_programs(&self) -> bool {
+        self.rigorous
+            .as_ref()
+            .is_some_and(|r| !r.has_cover() && r.pair_grid().is_some())
+    }
+
+    fn unfactored_spectral_program<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        k_per_um: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        let orders = self.rigorous.as_ref()?;
+        self.surface
+            .rigorous_program(b, orders, pair, k_per_um, lambda_nm)
     }
 
     fn reflectance_rgb_program<'a>(

@@ -47,6 +47,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use glam::DVec3;
 
 use super::rgb::GIVEN_BROAD_NODES;
+use super::rigorous_grid::PairGrid;
 use super::{PeriodicSurface, Profile};
 use crate::error::StamError;
 use crate::optics::fresnel::{conductor_reflectance, Fresnel};
@@ -67,9 +68,18 @@ pub struct RigorousOrders {
     period_um: f64,
     /// Index of the transparent cover (1: none).
     cover_eta: f64,
-    /// Order 0 at the RGB broad rule's wavelengths, built on first use
-    /// and shared by the materials of the table (`mirror_cell`).
-    mirror: Arc<OnceLock<MirrorSpectra>>,
+    /// What is derived from the table on first use and shared by its
+    /// materials (`derived_cell`).
+    derived: Arc<Derived>,
+}
+
+/// Resamplings of a table, each built on first use.
+#[derive(Debug, Default)]
+struct Derived {
+    /// Order 0 at the RGB broad rule's wavelengths.
+    mirror: OnceLock<MirrorSpectra>,
+    /// Every order's pair efficiencies for the programs.
+    pairs: OnceLock<Option<PairGrid>>,
 }
 
 /// Nodes per axis of `MirrorSpectra`'s grid, over (|kx|, |ky|) in
@@ -143,7 +153,7 @@ impl RigorousOrders {
         };
         let table = table::table(&grating, &table_spec(fourier_orders, cover_eta))?;
         Ok(RigorousOrders {
-            mirror: mirror_cell(&table),
+            derived: derived_cell(&table),
             table,
             period_um,
             cover_eta,
@@ -158,6 +168,11 @@ impl RigorousOrders {
         } else {
             0.0
         }
+    }
+
+    /// The cover's index (1: none).
+    pub fn cover_eta(&self) -> f64 {
+        self.cover_eta
     }
 
     pub fn has_cover(&self) -> bool {
@@ -182,7 +197,13 @@ impl RigorousOrders {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<RigorousOrders>()
             + self.table.memory_bytes()
-            + self.mirror.get().map_or(0, |m| m.values.len() * 4)
+            + self.derived.mirror.get().map_or(0, |m| m.values.len() * 4)
+            + self
+                .derived
+                .pairs
+                .get()
+                .and_then(|g| g.as_ref())
+                .map_or(0, |g| g.memory_bytes())
     }
 
     /// Order 0's efficiency for a pair whose half difference of tangential
@@ -201,7 +222,7 @@ impl RigorousOrders {
     }
 
     fn mirror_spectra(&self) -> &MirrorSpectra {
-        self.mirror.get_or_init(|| {
+        self.derived.mirror.get_or_init(|| {
             let lambdas = PeriodicSurface::given_broad_wavelengths();
             let (gx, gy, nl) = (MIRROR_GRID_X, MIRROR_GRID_Y, lambdas.len());
             let (hx, hy) = (
@@ -267,40 +288,56 @@ impl RigorousOrders {
         out
     }
 
+    /// Every order's pair efficiencies resampled for the programs (built on
+    /// first use, shared by the materials of the table).
+    /// None where the grid would be too large (periods above about 4 um).
+    pub(crate) fn pair_grid(&self) -> Option<&PairGrid> {
+        self.derived
+            .pairs
+            .get_or_init(|| PairGrid::build(self, self.period_um))
+            .as_ref()
+    }
+
     /// The efficiency of Stam's order n for the pair (unit wi, wo above
     /// the horizon) at `lambda_nm`: the table at the nearest exact pair's
     /// incidence, from both sides (see the module doc).
     pub fn efficiency(&self, n: i64, lambda_nm: f64, wi: DVec3, wo: DVec3) -> f64 {
+        self.pair_efficiency(n, lambda_nm, 0.5 * (wo.x - wi.x), 0.5 * (wi.y - wo.y))
+    }
+
+    /// `efficiency` by the exact pair's own coordinates: moved onto order
+    /// n (u_n = n lambda / Lam), wi and wo have the incident tangential
+    /// wavevectors (u_n / 2 + c, ky) and (u_n / 2 - c, -ky), c =
+    /// (wo.x - wi.x) / 2 and ky = (wi.y - wo.y) / 2 (the incident wave
+    /// travels along -w). Even in c (the two reads swap) and in ky (the
+    /// table's symmetry); a symmetric grating's order -n equals its n.
+    pub fn pair_efficiency(&self, n: i64, lambda_nm: f64, c: f64, ky: f64) -> f64 {
         let u_n = n as f64 * lambda_nm * 1e-3 / self.period_um;
-        // The pair's distance from the order along x, shared by both.
-        let half = 0.5 * (-(wi.x + wo.x) - u_n);
-        let ky = 0.5 * (wi.y - wo.y);
-        let from = |x: f64| {
-            // The incident wave travels along -w.
-            let (kx, ky) = within_disc(-(x + half), ky);
+        let from = |kx: f64| {
+            let (kx, ky) = within_disc(kx, ky);
             self.table.efficiency(lambda_nm, kx, ky, -n)
         };
-        // Order 0 reads (kx, ky) from one side and (-kx, ky) from the
+        // Order 0 reads (c, ky) from one side and (-c, ky) from the
         // other: the same read on a symmetric grating's table.
         if n == 0 && self.table.symmetric() {
-            return from(wi.x);
+            return from(c);
         }
-        0.5 * (from(wi.x) + from(wo.x))
+        0.5 * (from(0.5 * u_n + c) + from(0.5 * u_n - c))
     }
 }
 
-/// The grid of order 0's spectra of a table, one per table in the process
-/// (keyed by the table's address, which the entry keeps from reuse by
-/// holding the table).
-fn mirror_cell(table: &Arc<EfficiencyTable>) -> Arc<OnceLock<MirrorSpectra>> {
-    type Cell = (Arc<EfficiencyTable>, Arc<OnceLock<MirrorSpectra>>);
+/// The resamplings of a table, one set per table in the process (keyed by
+/// the table's address, which the entry keeps from reuse by holding the
+/// table).
+fn derived_cell(table: &Arc<EfficiencyTable>) -> Arc<Derived> {
+    type Cell = (Arc<EfficiencyTable>, Arc<Derived>);
     static CELLS: OnceLock<Mutex<HashMap<usize, Cell>>> = OnceLock::new();
     let cells = CELLS.get_or_init(|| Mutex::new(HashMap::new()));
     let key = Arc::as_ptr(table) as usize;
     let mut cells = cells.lock().unwrap_or_else(|e| e.into_inner());
     let (_, cell) = cells
         .entry(key)
-        .or_insert_with(|| (table.clone(), Arc::new(OnceLock::new())));
+        .or_insert_with(|| (table.clone(), Arc::new(Derived::default())));
     cell.clone()
 }
 
