@@ -172,10 +172,9 @@ impl Brdf {
     /// own part reads).
     fn program_with(&self, kind: ProgramKind, b: Builder, with_energy: bool) -> Option<Program> {
         // A model with its own f (rigorous gratings): f is the model's,
-        // with no Fresnel, G or energy factor; spectral programs only (the
-        // JIT RGB variants refuse it), where the model has them.
+        // with no Fresnel, G or energy factor, where the model has programs.
         let unfactored = self.surface.is_unfactored();
-        if unfactored && !(kind.spectral() && self.surface.programs().unfactored_programs()) {
+        if unfactored && !self.surface.programs().unfactored_programs() {
             return None;
         }
         // Only the reflectance kinds scale by the energy table (sampling
@@ -199,7 +198,11 @@ impl Brdf {
             ProgramKind::EvalRgb | ProgramKind::EvalSpectral => {
                 let (wi, wo) = (input3(&b), input3(&b));
                 let pair = PairProgram::new(&b, wi, wo);
-                if kind == ProgramKind::EvalRgb {
+                if kind == ProgramKind::EvalRgb && unfactored {
+                    let rgb = gamut_map_program(model.unfactored_rgb_program(&b, &pair)?);
+                    rgb.map(|c| pair.valid.select(c.finite_non_negative(), 0.0))
+                        .to_vec()
+                } else if kind == ProgramKind::EvalRgb {
                     let factor = per_wavelength.map(|e| {
                         move || Box::new(e.pair_factor(pair.wi, pair.wo)) as Box<dyn FactorProgram>
                     });

@@ -82,6 +82,16 @@ pub trait SurfacePrograms {
         None
     }
 
+    /// `unfactored_rgb`: f itself in linear sRGB, before gamut mapping;
+    /// None where the model has no program.
+    fn unfactored_rgb_program<'a>(
+        &self,
+        _b: &'a Builder,
+        _pair: &PairProgram<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        None
+    }
+
     /// `reflectance_rgb`: F^2 K integrated against the linear sRGB
     /// matching functions (f / G), before gamut mapping; with `factor`
     /// (the material's per-wavelength energy scaling, made by `factor`)

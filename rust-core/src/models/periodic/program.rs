@@ -13,6 +13,7 @@
 //!   trait's zero defaults are the native values.
 
 use super::rigorous::RigorousOrders;
+use super::rigorous_grid::PairGrid;
 use super::{
     Model, Periodic, PeriodicSurface, Profile, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT,
 };
@@ -22,7 +23,9 @@ use crate::optics::program::{PairProgram, Vec3};
 use crate::program::special::sin_squared;
 use crate::program::{Builder, Mask, ParamId, Table, Value};
 use crate::spectrum::WAVENUMBER_TIMES_NM;
+use std::cell::OnceCell;
 use std::f64::consts::PI;
+use std::sync::Arc;
 
 /// |c_n(beta)|^2 as program operations: the closed form of the rect
 /// profile, or the material's table of c_n interpolated as natively
@@ -43,6 +46,13 @@ pub(super) enum PowerProgram {
         symmetric: bool,
         complex: bool,
     },
+    /// Rigorous orders (their sampling weights): each order's pair
+    /// efficiency from the grid (rigorous_grid.rs), whose table a program
+    /// takes on its first read.
+    Given {
+        grid: Arc<PairGrid>,
+        table: OnceCell<Table>,
+    },
 }
 
 /// What the powers at one beta share: the rect profile's sin^2(beta h / 2),
@@ -61,6 +71,18 @@ pub(super) enum PowerAt<'a> {
 }
 
 impl PowerProgram {
+    /// The order weights of `model`'s sampling programs: its rigorous
+    /// orders' pair grid where it has one, else `new`'s powers.
+    pub(super) fn sampling(b: &Builder, model: &Periodic) -> PowerProgram {
+        match model.rigorous.as_ref().and_then(|r| r.pair_grid_arc()) {
+            Some(grid) => PowerProgram::Given {
+                grid,
+                table: OnceCell::new(),
+            },
+            None => PowerProgram::new(b, &model.surface),
+        }
+    }
+
     /// The powers of `surface` as its programs read them: a height
     /// texture's table (`texture_table`) where it has one.
     pub(super) fn new(b: &Builder, surface: &PeriodicSurface) -> PowerProgram {
@@ -130,6 +152,7 @@ impl PowerProgram {
                     inside,
                 }
             }
+            PowerProgram::Given { .. } => unreachable!("rigorous orders have no |c_n|^2"),
         }
     }
 
@@ -569,6 +592,15 @@ impl SurfacePrograms for Periodic {
         let orders = self.rigorous.as_ref()?;
         self.surface
             .rigorous_program(b, orders, pair, k_per_um, lambda_nm)
+    }
+
+    fn unfactored_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+    ) -> Option<[Value<'a>; 3]> {
+        let grid = self.rigorous.as_ref()?.pair_grid()?;
+        self.rigorous_rgb_program(b, pair, grid)
     }
 
     fn reflectance_rgb_program<'a>(

@@ -33,6 +33,7 @@
 //! broad rule's nodes.
 
 use super::program::{rect_s2, PowerAt, PowerProgram, ProfileProgram, RectOrder};
+use super::rigorous_grid::{GridPlace, PairGrid};
 use super::{Periodic, PeriodicSurface, RGB_BROAD_SIGMA, RGB_PEAK_HALF_WIDTH_SIGMAS};
 use super::{RGB_SMOOTH_NODES, RGB_TAIL_EXPONENT};
 use crate::models::{FactorMaker, Shading};
@@ -51,6 +52,10 @@ const NU_HI: f64 = 1000.0 / spectrum::LAMBDA_MIN_NM;
 /// The most narrow orders an RGB program unrolls (periods up to ~20 um);
 /// beyond, the material has no RGB program.
 pub const MAX_RGB_ORDERS: usize = 64;
+
+/// Rigorous orders: the broad rule's nodes (the native rule's
+/// GIVEN_BROAD_NODES cost a first render of minutes, docs/rigorous.md).
+const PROGRAM_BROAD_NODES: usize = 32;
 
 /// The smoothed weight's finest level (narrower peaks use it: their W~
 /// differs from the finest level's by ~s |slope jumps| of W, below 1e-3).
@@ -711,7 +716,47 @@ impl PowerProgram {
                 };
                 known.select(p, 0.0)
             }
+            PowerProgram::Given { .. } => unreachable!("rigorous orders have no |c_n|^2"),
         }
+    }
+}
+
+/// Rigorous orders' powers in a program: the pair grid's efficiencies at
+/// the pair's (c, ky) (rigorous_grid.rs).
+struct GivenPowers<'a, 'g> {
+    b: &'a Builder,
+    grid: &'g PairGrid,
+    table: Table,
+    c: Value<'a>,
+    ky: Value<'a>,
+}
+
+impl<'a, 'g> GivenPowers<'a, 'g> {
+    fn new(b: &'a Builder, grid: &'g PairGrid, pair: &PairProgram<'a>) -> Self {
+        let (wi, wo) = (pair.wi, pair.wo);
+        GivenPowers {
+            b,
+            grid,
+            table: b.table(grid.values.clone()),
+            c: (wo[0] - wi[0]) * 0.5,
+            ky: (wi[1] - wo[1]) * 0.5,
+        }
+    }
+
+    /// Where a wavelength lies on the grid (shared by the orders).
+    fn place(&self, lambda_nm: Value<'a>) -> GridPlace<Value<'a>> {
+        self.grid.place(lambda_nm, self.c, self.ky)
+    }
+
+    /// Order n's efficiency at `place`.
+    fn read(&self, place: &GridPlace<Value<'a>>, n: Value<'a>) -> Value<'a> {
+        let (b, table) = (self.b, self.table);
+        self.grid.read_at(place, n, |i| b.gather(table, i))
+    }
+
+    /// Order n's efficiency at a wavelength.
+    fn at(&self, lambda_nm: Value<'a>, n: Value<'a>) -> Value<'a> {
+        self.read(&self.place(lambda_nm), n)
     }
 }
 
@@ -730,6 +775,35 @@ impl Periodic {
         shading: &Shading,
         pair: &PairProgram<'a>,
         factor: Option<FactorMaker<'_, 'a>>,
+    ) -> Option<[Value<'a>; 3]> {
+        self.rgb_program_with(b, Some(shading), pair, factor, None)
+    }
+
+    /// f of rigorous orders in RGB, before gamut mapping (`unfactored_rgb`):
+    /// `rgb_program`'s integration with each order's power the pair grid's
+    /// efficiency (and no Fresnel term, G or 1 / w^2): the quadratic fit
+    /// through three wavelengths for narrow peaks, where the native path
+    /// takes midpoints for the wider ones, and 32 nodes for broad peaks,
+    /// where it takes 96 (docs/rigorous.md, "Programs for the JIT
+    /// variants").
+    pub(super) fn rigorous_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        pair: &PairProgram<'a>,
+        grid: &PairGrid,
+    ) -> Option<[Value<'a>; 3]> {
+        self.rgb_program_with(b, None, pair, None, Some(grid))
+    }
+
+    /// `rgb_program` (Stam's powers times the shading's Fresnel term) or,
+    /// with `given`, `rigorous_rgb_program`.
+    fn rgb_program_with<'a>(
+        &self,
+        b: &'a Builder,
+        shading: Option<&Shading>,
+        pair: &PairProgram<'a>,
+        factor: Option<FactorMaker<'_, 'a>>,
+        given: Option<&PairGrid>,
     ) -> Option<[Value<'a>; 3]> {
         let p = &self.surface;
         // The period, the coherence length, the profile's height (and a
@@ -751,8 +825,10 @@ impl Periodic {
             Some(plan) => plan,
             None => RgbPlan::new(1.0, p.period_um, p.coherence_um)?,
         };
-        let powers = PowerProgram::new(b, p);
-        let lam = if follows {
+        let powers = given.is_none().then(|| PowerProgram::new(b, p));
+        // Rigorous efficiencies, tabulated for the built grating, do not
+        // follow a period: it stays a constant.
+        let lam = if follows && given.is_none() {
             b.param(ParamId::PeriodUm, p.period_um)
         } else {
             b.built(p.period_um)
@@ -789,15 +865,26 @@ impl Periodic {
         let power_rgb =
             |beta: Value<'a>, n: Value<'a>, rect: Option<RectOrder<'a>>| match (profile, rect) {
                 (ProfileProgram::Rect { height, .. }, Some(r)) => r.power(rect_s2(beta, height)),
-                _ => powers.power_rgb(b, profile.scaled_beta(beta), n),
+                _ => powers.as_ref().expect("Stam's powers").power_rgb(
+                    b,
+                    profile.scaled_beta(beta),
+                    n,
+                ),
             };
+        // Rigorous orders' efficiencies (the pair grid's, at the pair's
+        // (c, ky)).
+        let given = given.map(|grid| GivenPowers::new(b, grid, pair));
         let rect_order = |n: Value<'a>| match profile {
             ProfileProgram::Rect { fill, .. } => Some(RectOrder::new(fill, n)),
             ProfileProgram::Scaled(_) => None,
         };
         let (u, v, w) = (pair.u, pair.v, pair.w);
-        let refl = Reflectance::new(b, shading.fresnel, pair.cos_half);
-        let rule = spectrum::smooth_rule(RGB_SMOOTH_NODES);
+        let refl = shading.map(|shading| Reflectance::new(b, shading.fresnel, pair.cos_half));
+        let rule = spectrum::smooth_rule(if given.is_some() {
+            PROGRAM_BROAD_NODES
+        } else {
+            RGB_SMOOTH_NODES
+        });
         let rho2 = u * u + v * v;
         let positive = rho2.gt(0.0);
         let rho2 = positive.select(rho2, 1.0);
@@ -805,7 +892,12 @@ impl Periodic {
         // t = s^2, s = 1 / (2 sqrt 2 pi l rho).
         let t = inv_rho2 * t_per_inv_rho2;
         let s = t.sqrt();
-        let c_const = four_pi_l2 / (w * w);
+        // k^2 l^2 / (pi w^2) = c_const nu^2 (Stam), k^2 l^2 / pi (given).
+        let c_const = if given.is_some() {
+            four_pi_l2
+        } else {
+            four_pi_l2 / (w * w)
+        };
         let narrow = positive & s.le(RGB_BROAD_SIGMA);
         let ok = w.lt(0.0)
             & u.finite()
@@ -857,22 +949,26 @@ impl Periodic {
             (None, None) => return Some([b.c(0.0); 3]),
         };
 
-        let flat = refl.flat().unwrap_or_else(|| b.c(1.0));
+        let flat = refl
+            .as_ref()
+            .and_then(|r| r.flat())
+            .unwrap_or_else(|| b.c(1.0));
         let rgb = b.region(ok & any, || {
             // F^2 (1 when flat: applied at the end) times the factor, at a
             // wavenumber and at a node of the broad rule.
             let factor = factor.map(|make| make());
             let factor = factor.as_deref();
-            let refl_at = |nu: Value<'a>| match (factor, refl.flat()) {
+            let refl_at = |refl: &Reflectance<'a>, nu: Value<'a>| match (factor, refl.flat()) {
                 (None, _) => refl.at(b, nu),
                 (Some(f), Some(_)) => f.at(1000.0 / nu),
                 (Some(f), None) => refl.at(b, nu) * f.at(1000.0 / nu),
             };
-            let refl_at_node = |f2: &[Value<'a>], j: usize| match (factor, refl.flat()) {
-                (None, _) => f2[j],
-                (Some(f), Some(_)) => f.at_nm(rule.lambda_nm[j]),
-                (Some(f), None) => f2[j] * f.at_nm(rule.lambda_nm[j]),
-            };
+            let refl_at_node =
+                |refl: &Reflectance<'a>, f2: &[Value<'a>], j: usize| match (factor, refl.flat()) {
+                    (None, _) => f2[j],
+                    (Some(f), Some(_)) => f.at_nm(rule.lambda_nm[j]),
+                    (Some(f), None) => f2[j] * f.at_nm(rule.lambda_nm[j]),
+                };
 
             // Narrow peaks, each order where some lane takes it.
             // C1 along the parameters a renderer differentiates.
@@ -880,7 +976,7 @@ impl Periodic {
                 b,
                 &plan,
                 t,
-                follows && b.differentiated(ParamId::PeriodUm),
+                follows && given.is_none() && b.differentiated(ParamId::PeriodUm),
                 follows && b.differentiated(ParamId::CoherenceUm),
             );
             let norm = s * (2.0 * PI).sqrt();
@@ -897,9 +993,13 @@ impl Periodic {
                     let delta = (s * 3f64.sqrt()).min((bb - a) * 0.5).max(1e-9);
                     let c = mu.max(a + delta).min(bb - delta);
                     let rect = rect_order(n);
-                    let s_at = |nu: Value<'a>| {
-                        let beta = nu * w * (2.0 * PI);
-                        refl_at(nu) * nu * nu * power_rgb(beta, n, rect)
+                    let s_at = |nu: Value<'a>| match (&refl, &given) {
+                        (Some(refl), _) => {
+                            let beta = nu * w * (2.0 * PI);
+                            refl_at(refl, nu) * nu * nu * power_rgb(beta, n, rect)
+                        }
+                        (None, Some(eta)) => nu * nu * eta.at(1000.0 / nu, n),
+                        (None, None) => unreachable!("Stam's or given powers"),
                     };
                     let (sm, s0, sp) = (s_at(c - delta), s_at(c), s_at(c + delta));
                     let inv_2d = 0.5 / delta;
@@ -929,7 +1029,7 @@ impl Periodic {
             // order 0 (a_u^2 + a_v^2) nu^2; the rect profile's s^2 is
             // sin^2((pi h w) nu); c_const and nu^2 go with the weights.
             let broad_sum = b.region(!narrow, || {
-                let f2 = refl.at_nodes(b);
+                let f2 = refl.as_ref().map(|r| r.at_nodes(b));
                 let (a_u, a_v) = (u * two_pi_l, v * two_pi_l);
                 let a_v2 = a_v * a_v;
                 let a2 = a_u.fma(a_u, a_v2);
@@ -946,13 +1046,17 @@ impl Periodic {
                 let mut broad_sum = [b.c(0.0); 3];
                 for (j, (&nu, weights)) in rule.nu_per_um.iter().zip(&rule.weights).enumerate() {
                     let nu2 = nu * nu;
-                    let (at, s2): (Option<PowerAt>, _) = match phase {
-                        Some(phase) => (None, Some(sin_squared(phase * nu))),
-                        None => {
+                    let (at, s2): (Option<PowerAt>, _) = match (phase, &powers) {
+                        _ if given.is_some() => (None, None),
+                        (Some(phase), _) => (None, Some(sin_squared(phase * nu))),
+                        (None, Some(powers)) => {
                             let beta = w * (2.0 * PI * nu);
                             (Some(powers.at(b, profile.scaled_beta(beta))), None)
                         }
+                        (None, None) => unreachable!("Stam's powers"),
                     };
+                    // The node's place on the pair grid, shared by the orders.
+                    let place_j = given.as_ref().map(|eta| eta.place(b.c(rule.lambda_nm[j])));
                     let mut sum = b.c(0.0);
                     for (&(n, take, rect), &minus_b) in broad_orders.iter().zip(&minus_b) {
                         let e = if n == 0.0 {
@@ -961,15 +1065,24 @@ impl Periodic {
                             let d = a_u.fma(nu, minus_b);
                             d.fma(d, a_v2 * nu2)
                         };
-                        let power = match (rect, s2, &at) {
-                            (Some(r), Some(s2), _) => r.power(s2),
-                            (_, _, Some(at)) => powers.power_const(b, at, n as i64),
+                        let power = match (rect, s2, &at, &given) {
+                            (_, _, _, Some(eta)) => {
+                                eta.read(place_j.as_ref().expect("given"), b.c(n))
+                            }
+                            (Some(r), Some(s2), _, _) => r.power(s2),
+                            (_, _, Some(at), _) => powers
+                                .as_ref()
+                                .expect("Stam's powers")
+                                .power_const(b, at, n as i64),
                             _ => unreachable!("the powers are prepared for the profile"),
                         };
                         let term = power * (-e).exp();
                         sum = sum + if single { term } else { take.select(term, 0.0) };
                     }
-                    let val = refl_at_node(&f2, j) * sum;
+                    let val = match (&refl, &f2) {
+                        (Some(refl), Some(f2)) => refl_at_node(refl, f2, j) * sum,
+                        _ => sum,
+                    };
                     for ch in 0..3 {
                         broad_sum[ch] = val.fma(weights[ch] * nu2, broad_sum[ch]);
                     }

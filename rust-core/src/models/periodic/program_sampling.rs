@@ -232,6 +232,15 @@ impl Periodic {
         // it (a height texture's above all; one wavelength only: the RGB
         // order table is made at the built height); other profiles keep
         // beta.
+        // Rigorous orders: the efficiency the order's lobe carries at its
+        // centre (the pair grid's, read at (wi, its centre)).
+        if let PowerProgram::Given { grid, table } = powers {
+            let table = *table.get_or_init(|| b.table(grid.values.clone()));
+            let (c, ky) = ((x - wi[0]) * 0.5, (wi[1] - y) * 0.5);
+            return grid
+                .read(n, lambda, c, ky, |i| b.gather(table, i))
+                .finite_non_negative();
+        }
         let beta = self
             .surface
             .profile_program(b, b.built(self.surface.period_um))
@@ -333,7 +342,7 @@ impl Periodic {
         let moving = [ParamId::PeriodUm, ParamId::HeightUm, ParamId::WidthUm]
             .iter()
             .any(|&id| b.differentiated(id));
-        // (Rigorous orders' weights come from the table alone.)
+        // (Rigorous orders' weights come from their grid alone.)
         if (moving || self.surface.texture_table.is_some()) && self.rigorous.is_none() {
             return None;
         }
@@ -383,36 +392,17 @@ impl Periodic {
 
     /// `spectral_order_table` for orders -n_max..=n_max.
     fn make_spectral_order_table(&self, n_max: usize) -> Vec<f32> {
-        let (lo, hi) = SPECTRAL_TABLE_BAND_NM;
-        let nodes: Vec<Vec<f64>> = (0..SPECTRAL_NODES)
-            .map(|j| vec![lo + (hi - lo) * j as f64 / (SPECTRAL_NODES - 1) as f64])
-            .collect();
-        if self.rigorous.is_some() {
-            // Rigorous orders: the native strategy's weights (their
-            // efficiencies), which no program computes.
-            let n_max = n_max as i64;
-            let du = 1.0 / (1000.0 * self.surface.period_um);
-            return tabulate_cells(
-                SPECTRAL_CELLS_PER_AXIS,
-                &nodes,
-                (2 * n_max + 1) as usize,
-                || (),
-                |_, wi, extra, out| {
-                    let lambda = extra[0];
-                    for (o, n) in out.iter_mut().zip(-n_max..=n_max) {
-                        let wo = super::sampling::rim_direction(wi, n as f64 * lambda * du);
-                        *o = self.order_weight(n, wi, wo, lambda);
-                    }
-                },
-            );
-        }
         let b = Builder::new();
         let wi = [b.input(), b.input(), b.input()];
         let lambda = b.input();
-        let powers = PowerProgram::new(&b, &self.surface);
+        let powers = PowerProgram::sampling(&b, self);
         let n_max_i = n_max as i64;
         let outputs: Vec<Value> = (-n_max_i..=n_max_i)
             .map(|n| self.order_weight_program(&b, &powers, wi, b.c(n as f64), lambda))
+            .collect();
+        let (lo, hi) = SPECTRAL_TABLE_BAND_NM;
+        let nodes: Vec<Vec<f64>> = (0..SPECTRAL_NODES)
+            .map(|j| vec![lo + (hi - lo) * j as f64 / (SPECTRAL_NODES - 1) as f64])
             .collect();
         tabulate_over_wi_cells(&b.finish(&outputs), SPECTRAL_CELLS_PER_AXIS, &nodes)
     }
@@ -526,7 +516,7 @@ impl Periodic {
     fn make_rgb_order_table(&self, n_max: usize) -> Vec<f32> {
         let b = Builder::new();
         let wi = [b.input(), b.input(), b.input()];
-        let powers = PowerProgram::new(&b, &self.surface);
+        let powers = PowerProgram::sampling(&b, self);
         let (weights, tilts) = self.rgb_orders_exact(&b, &powers, wi, n_max);
         let outputs: Vec<Value> = weights.into_iter().chain(tilts).collect();
         let entries = 2 * n_max + 1;
@@ -551,7 +541,7 @@ impl Periodic {
         lambda_nm: Option<Value<'a>>,
         u: [Value<'a>; 3],
     ) -> Option<SampleProgram<'a>> {
-        let powers = PowerProgram::new(b, &self.surface);
+        let powers = PowerProgram::sampling(b, self);
         let orders = self.orders(b, &powers, wi, lambda_nm)?;
         let lobe_ok = orders.total.gt(0.0) & orders.total.finite();
         let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
@@ -641,7 +631,7 @@ impl Periodic {
         let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
         let (lobe, total) = match lambda_nm {
             Some(lambda) => {
-                let powers = PowerProgram::new(b, &self.surface);
+                let powers = PowerProgram::sampling(b, self);
                 let orders = self.orders(b, &powers, wi, Some(lambda))?;
                 let sigma = self.sigma(lambda);
                 let inv2s2 = 0.5 / (sigma * sigma);
@@ -753,46 +743,26 @@ fn wi_cell<'a>(wi: Vec3<'a>, cells: usize) -> Value<'a> {
 /// added 0.08-0.15 s to its first spectral program's export on 2 cores).
 fn tabulate_over_wi_cells(program: &Program, cells: usize, runs: &[Vec<f64>]) -> Vec<f32> {
     let n_out = program.outputs.len();
-    tabulate_cells(
-        cells,
-        runs,
-        n_out,
-        || (Vec::new(), Vec::new()),
-        |(regs, inputs): &mut (Vec<f64>, Vec<f64>), wi, extra, out| {
-            inputs.clear();
-            inputs.extend([wi.x, wi.y, wi.z].into_iter().chain(extra.iter().copied()));
-            program.run_into(inputs, regs, out);
-        },
-    )
-}
-
-/// `tabulate_over_wi_cells` of any function of the cell's centre wi and a
-/// run's values (`eval` writes `n_out` outputs; `scratch` makes each
-/// thread's working memory).
-fn tabulate_cells<S>(
-    cells: usize,
-    runs: &[Vec<f64>],
-    n_out: usize,
-    scratch: impl Fn() -> S + Sync,
-    eval: impl Fn(&mut S, glam::DVec3, &[f64], &mut [f64]) + Sync,
-) -> Vec<f32> {
     let row_len = cells * runs.len() * n_out;
     let mut table = vec![0.0f32; cells * row_len];
     let centre = |i: usize| -1.0 + (i as f64 + 0.5) * 2.0 / cells as f64;
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let rows_per_thread = cells.div_ceil(threads);
-    let (scratch, eval) = (&scratch, &eval);
     std::thread::scope(|scope| {
         for (chunk, rows) in table.chunks_mut(rows_per_thread * row_len).enumerate() {
             scope.spawn(move || {
-                let (mut state, mut out) = (scratch(), vec![0.0f64; n_out]);
+                let (mut regs, mut out) = (Vec::new(), vec![0.0f64; n_out]);
                 let mut values = rows.iter_mut();
                 for row in 0..rows_per_thread.min(cells - chunk * rows_per_thread) {
                     let iy = chunk * rows_per_thread + row;
                     for ix in 0..cells {
                         let wi = super::sampling::within_rim(centre(ix), centre(iy));
                         for extra in runs {
-                            eval(&mut state, wi, extra, &mut out);
+                            let inputs: Vec<f64> = [wi.x, wi.y, wi.z]
+                                .into_iter()
+                                .chain(extra.iter().copied())
+                                .collect();
+                            program.run_into(&inputs, &mut regs, &mut out);
                             // (out first: zip takes from its first iterator first)
                             for (&x, v) in out.iter().zip(values.by_ref()) {
                                 *v = if x.is_finite() { x as f32 } else { 0.0 };

@@ -79,7 +79,7 @@ struct Derived {
     /// Order 0 at the RGB broad rule's wavelengths.
     mirror: OnceLock<MirrorSpectra>,
     /// Every order's pair efficiencies for the programs.
-    pairs: OnceLock<Option<PairGrid>>,
+    pairs: OnceLock<Option<Arc<PairGrid>>>,
 }
 
 /// Nodes per axis of `MirrorSpectra`'s grid, over (|kx|, |ky|) in
@@ -292,10 +292,18 @@ impl RigorousOrders {
     /// first use, shared by the materials of the table).
     /// None where the grid would be too large (periods above about 4 um).
     pub(crate) fn pair_grid(&self) -> Option<&PairGrid> {
+        self.pair_grid_cell().as_deref()
+    }
+
+    /// `pair_grid`, shared.
+    pub(crate) fn pair_grid_arc(&self) -> Option<Arc<PairGrid>> {
+        self.pair_grid_cell().clone()
+    }
+
+    fn pair_grid_cell(&self) -> &Option<Arc<PairGrid>> {
         self.derived
             .pairs
-            .get_or_init(|| PairGrid::build(self, self.period_um))
-            .as_ref()
+            .get_or_init(|| PairGrid::build(self, self.period_um).map(Arc::new))
     }
 
     /// The efficiency of Stam's order n for the pair (unit wi, wo above

@@ -138,7 +138,6 @@ impl PairGrid {
     /// Order n's pair efficiency at (lambda, c, ky), trilinear on the grid
     /// from `fetch` (a value of `values` by index); 0 for orders the grid
     /// does not hold and where the order does not exist (|u_n| >= 2).
-    #[cfg(test)]
     pub(crate) fn read<R: Real>(
         &self,
         n: R,

@@ -313,9 +313,6 @@ fn rigorous_parameters_are_checked_by_name() {
         again,
         crate::material::params::MaterialParams::from_json(DISC).unwrap()
     );
-    // The JIT variants have no programs for it yet: they refuse it.
-    use crate::material::program::ProgramKind;
-    assert!(disc().program(ProgramKind::EvalRgb).is_none());
 }
 
 /// Measurement (docs/rigorous.md): the material's order efficiencies
@@ -856,7 +853,7 @@ fn pair_grid_reads_the_table_within_its_measured_error() {
 /// The JIT programs of the rigorous disc: EVAL_SPECTRAL, run in f64, is
 /// `kernel_given` with each order's power read from the pair grid (the
 /// only difference from the native f, measured above), at pairs near
-/// orders; the spectral kinds exist and the RGB ones do not; the period
+/// orders; every kind exists; the period
 /// is no parameter of it (its efficiencies could not follow one).
 #[test]
 fn rigorous_spectral_program_is_the_kernel_with_the_grids_powers() {
@@ -866,7 +863,7 @@ fn rigorous_spectral_program_is_the_kernel_with_the_grids_powers() {
     use crate::testing::programs::exported;
     let brdf = disc();
     for kind in ProgramKind::ALL {
-        assert_eq!(exported(brdf, kind).is_some(), kind.spectral(), "{kind:?}");
+        assert!(exported(brdf, kind).is_some(), "{kind:?}");
     }
     let program = exported(brdf, ProgramKind::EvalSpectral).unwrap();
     assert!(program.params.iter().all(|p| p.0 != ParamId::PeriodUm));
@@ -944,4 +941,107 @@ fn chi2_rigorous_sampling_programs() {
         };
         assert!(p > 0.01, "cos_i {}: p = {p}", wi.z);
     }
+}
+
+/// The rigorous disc's EVAL_RGB program (f64) against the native RGB
+/// integration of the same powers (the pair grid's), at pairs near orders
+/// (within 2 sd of each order's peak): the program fits narrow peaks
+/// through three wavelengths where the native rule takes midpoints, and
+/// takes 32 nodes for broad ones where it takes 96; (worst, p90) of the
+/// error relative to the pair's largest channel, and the pairs compared.
+fn rigorous_rgb_program_errors(coherence_um: f64, seed: u64) -> (f64, f64, usize) {
+    use crate::material::program::ProgramKind;
+    use crate::optics::geometry::PairGeometry;
+    use crate::sampling::SplitMix64;
+    use crate::testing::programs::exported;
+    let json = format!(
+        r#"{{"surface":"cd","fresnel":"aluminium","orders":"rigorous","coherence_um":{coherence_um}}}"#
+    );
+    let brdf = Brdf::from_json(&json).unwrap();
+    let program = exported(&brdf, ProgramKind::EvalRgb).unwrap();
+    let orders = disc_orders();
+    let grid = orders.pair_grid().unwrap();
+    let surface =
+        super::PeriodicSurface::new(CD_PERIOD_UM, coherence_um, disc_grating().profile).unwrap();
+    let lambdas = super::PeriodicSurface::given_broad_wavelengths();
+    let mut rng = SplitMix64(seed);
+    let (mut errors, mut tries) = (Vec::new(), 0);
+    while errors.len() < 300 && tries < 100_000 {
+        tries += 1;
+        let wi = direction(75.0 * rng.next_f64(), 360.0 * rng.next_f64());
+        let lambda = 400.0 + 300.0 * rng.next_f64();
+        let n = (rng.next_f64() * 9.0) as i64 - 4;
+        let sd = 1.0
+            / (std::f64::consts::SQRT_2
+                * crate::spectrum::wavenumber_per_um(lambda)
+                * coherence_um);
+        let x = -wi.x - n as f64 * lambda * 1e-3 / CD_PERIOD_UM
+            + 2.0 * sd * (2.0 * rng.next_f64() - 1.0);
+        let y = -wi.y + 2.0 * sd * (2.0 * rng.next_f64() - 1.0);
+        if x * x + y * y > 0.98 {
+            continue;
+        }
+        let wo = DVec3::new(x, y, (1.0 - x * x - y * y).sqrt());
+        let geom = PairGeometry::new(wi, wo).unwrap();
+        let (c, ky) = (0.5 * (wo.x - wi.x), 0.5 * (wi.y - wo.y));
+        let read =
+            |m: i64, l: f64| grid.read(m as f64, l, c, ky, |i: f64| grid.values[i as usize] as f64);
+        let want = crate::spectrum::gamut_map(given_rgb(&surface, &geom, &read, &|m, j| {
+            read(m, lambdas[j])
+        }));
+        let got = program.run(&[wi.x, wi.y, wi.z, wo.x, wo.y, wo.z]);
+        let peak = want.iter().cloned().fold(0.0, f64::max);
+        if peak > 1e-2 {
+            let e = (0..3)
+                .map(|ch| (got[ch] - want[ch]).abs())
+                .fold(0.0, f64::max)
+                / peak;
+            errors.push(e);
+        }
+    }
+    errors.sort_by(f64::total_cmp);
+    let p90 = errors[errors.len() * 9 / 10];
+    (*errors.last().unwrap(), p90, errors.len())
+}
+
+/// Measured (docs/rigorous.md): worst 2.3e-2 and p90 2.9e-3 at 50 um,
+/// worst 0.157 and p90 0.022 at 8 um (the three-wavelength fit misses an
+/// efficiency's kinks inside peaks a few nm wide; the native rule takes
+/// midpoints there).
+#[test]
+fn rigorous_rgb_program_is_the_native_rule_within_its_fit() {
+    for (l, max_limit, p90_limit) in [(50.0, 0.035, 5e-3), (8.0, 0.2, 0.03)] {
+        let (max, p90, n) = rigorous_rgb_program_errors(l, 11);
+        println!("rigorous EVAL_RGB program against the native rule on the grid, coherence {l} um: {n} pairs, worst {max:.2e}, p90 {p90:.2e} of the largest channel");
+        assert!(
+            n > 200 && max < max_limit && p90 < p90_limit,
+            "{l}: {max} {p90}"
+        );
+    }
+}
+
+/// The rigorous disc's RGB sampling programs: chi-square against the pdf
+/// program.
+#[test]
+fn chi2_rigorous_rgb_sampling_programs() {
+    use crate::testing::chi2::chi2_fit;
+    use crate::testing::programs::ProgramSampler;
+    let brdf = Brdf::from_json(
+        r#"{"surface":"cd","fresnel":"aluminium","orders":"rigorous","coherence_um":4}"#,
+    )
+    .unwrap();
+    let wi = direction(45.0, 70.0);
+    let sampler = ProgramSampler::new(&brdf, wi, None);
+    let fit = chi2_fit(&sampler, 77, 100_000);
+    println!(
+        "chi2 rigorous RGB program: p = {:.4}, integral {:.5}",
+        fit.p_value, fit.integral
+    );
+    assert!(fit.integral <= 1.0 + 2e-3, "{}", fit.integral);
+    let p = if fit.p_value > 0.01 {
+        fit.p_value
+    } else {
+        chi2_fit(&sampler, 7_777_778, 400_000).p_value
+    };
+    assert!(p > 0.01, "p = {p}");
 }

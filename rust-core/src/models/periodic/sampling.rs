@@ -586,7 +586,7 @@ impl Periodic {
     /// without the Fresnel term at the incidence (`order_reflectance`):
     /// Stam's `order_weight`, or a rigorous grating's efficiency (which
     /// includes the metal's reflection).
-    pub(super) fn order_weight(&self, n: i64, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
+    fn order_weight(&self, n: i64, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
         match &self.rigorous {
             None => order_weight(wi, wo, lambda_nm, 1.0, |beta| {
                 self.surface.order_power(n, beta)
@@ -621,7 +621,7 @@ impl Periodic {
 
 /// Direction of a grating order's centre (u, v) = (u_n, 0) for wi, moved
 /// onto the rim (cosine GRATING_RIM_COS) when it is below it.
-pub(super) fn rim_direction(wi: DVec3, u_n: f64) -> DVec3 {
+fn rim_direction(wi: DVec3, u_n: f64) -> DVec3 {
     within_rim(-wi.x - u_n, -wi.y)
 }
 
