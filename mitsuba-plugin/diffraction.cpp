@@ -158,8 +158,8 @@ Diffraction BSDF (:monosp:`diffraction`)
      core's rigorous solver, tabulated once per grating and metal (seconds,
      kept on disk; ``docs/rigorous.md``). Rigorous orders need ``fresnel``
      as a metal or ``eta``/``k``, conserve energy by themselves (no
-     ``energy``), and run in every variant (the JIT ones refuse a
-     ``cover_eta`` for now).
+     ``energy``), and run in every variant (JIT: periods up to about
+     4 um).
      (Default: ``kirchhoff``)
    - |exposed| (a string)
  * - fourier_orders

@@ -17,7 +17,7 @@ use super::rigorous_grid::PairGrid;
 use super::{
     Model, Periodic, PeriodicSurface, Profile, BETA_MAX, EXP_UNDERFLOW, KERNEL_TAIL_EXPONENT,
 };
-use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
+use crate::models::{FactorMaker, FactorProgram, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::fresnel::conductor_reflectance;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::special::sin_squared;
@@ -441,13 +441,42 @@ impl PeriodicSurface {
         });
         let OrderSum { sum, l, e_v, x } = sum;
         let mut f = (k * l).sq() * (1.0 / PI) * sum;
-        if orders.has_cover() {
-            let eta = orders.cover_eta();
-            let through = |cos: Value<'a>| -conductor_reflectance(cos, b.c(eta), b.c(0.0)) + 1.0;
-            f = f * through(wi[2]) * through(wo[2]);
+        if let Some(through) = cover_through_program(b, orders, pair) {
+            f = f * through;
         }
         let ok = k.gt(0.0) & pair.w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
         Some(ok.select(f.finite_non_negative(), 0.0))
+    }
+}
+
+/// What a rigorous grating's cover reflects at an incidence cosine (None
+/// without one): `RigorousOrders::cover_reflectance`.
+pub(super) fn cover_reflectance_program<'a>(
+    b: &'a Builder,
+    orders: &RigorousOrders,
+    cos: Value<'a>,
+) -> Option<Value<'a>> {
+    orders
+        .has_cover()
+        .then(|| conductor_reflectance(cos, b.c(orders.cover_eta()), b.c(0.0)))
+}
+
+/// What the cover lets through on the way in and out, (1 - R(cos_i))
+/// (1 - R(cos_o)) (None without one).
+pub(super) fn cover_through_program<'a>(
+    b: &'a Builder,
+    orders: &RigorousOrders,
+    pair: &PairProgram<'a>,
+) -> Option<Value<'a>> {
+    let r_i = cover_reflectance_program(b, orders, pair.wi[2])?;
+    let r_o = cover_reflectance_program(b, orders, pair.wo[2])?;
+    Some((1.0 - r_i) * (1.0 - r_o))
+}
+
+impl Periodic {
+    /// `cover_reflectance_program` of the material's rigorous orders.
+    pub(super) fn cover_program<'a>(&self, b: &'a Builder, cos: Value<'a>) -> Option<Value<'a>> {
+        cover_reflectance_program(b, self.rigorous.as_ref()?, cos)
     }
 }
 
@@ -574,12 +603,44 @@ impl SurfacePrograms for Periodic {
         )
     }
 
-    /// Rigorous orders without a cover (whose mirror lobe the sampling
-    /// programs do not draw yet), where their pair grid is not too large.
+    /// Rigorous orders, where their pair grid is not too large.
     fn unfactored_programs(&self) -> bool {
         self.rigorous
             .as_ref()
-            .is_some_and(|r| !r.has_cover() && r.pair_grid().is_some())
+            .is_some_and(|r| r.pair_grid().is_some())
+    }
+
+    /// A rigorous grating's cover reflects like a mirror (0 without one).
+    fn coherent_spectral_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        cos_i: Value<'a>,
+        _lambda_nm: Value<'a>,
+    ) -> Option<Value<'a>> {
+        Some(self.cover_program(b, cos_i).unwrap_or_else(|| b.c(0.0)))
+    }
+
+    /// The cover's reflectance is flat in wavelength: the same in R, G, B.
+    fn coherent_rgb_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        cos_i: Value<'a>,
+        _factor: Option<&dyn FactorProgram<'a>>,
+    ) -> Option<[Value<'a>; 3]> {
+        Some([self.cover_program(b, cos_i).unwrap_or_else(|| b.c(0.0)); 3])
+    }
+
+    /// Sampling picks the cover's mirror lobe with its reflectance.
+    fn coherent_probability_program<'a>(
+        &self,
+        b: &'a Builder,
+        _shading: &Shading,
+        wi: Vec3<'a>,
+        _lambda_nm: Option<Value<'a>>,
+    ) -> Option<Value<'a>> {
+        Some(self.cover_program(b, wi[2]).unwrap_or_else(|| b.c(0.0)))
     }
 
     fn unfactored_spectral_program<'a>(
@@ -599,8 +660,12 @@ impl SurfacePrograms for Periodic {
         b: &'a Builder,
         pair: &PairProgram<'a>,
     ) -> Option<[Value<'a>; 3]> {
-        let grid = self.rigorous.as_ref()?.pair_grid()?;
-        self.rigorous_rgb_program(b, pair, grid)
+        let orders = self.rigorous.as_ref()?;
+        let rgb = self.rigorous_rgb_program(b, pair, orders.pair_grid()?)?;
+        Some(match cover_through_program(b, orders, pair) {
+            Some(through) => rgb.map(|c| c * through),
+            None => rgb,
+        })
     }
 
     fn reflectance_rgb_program<'a>(

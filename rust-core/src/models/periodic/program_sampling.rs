@@ -547,7 +547,16 @@ impl Periodic {
         let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
         // Uniforms outside [0, 1] (or NaN) are clamped (NaN to 0).
         let u = u.map(|x| x.finite().select(x, 0.0).clamp(0.0, 1.0));
-        let u0 = u[0];
+        // A rigorous grating's cover: u0 picks its mirror lobe with its
+        // reflectance, then (remapped) the glossy part.
+        let cover = self.cover_program(b, wi[2]);
+        let (coherent, u0) = match cover {
+            Some(p_c) => (
+                Some(u[0].lt(p_c)),
+                ((u[0] - p_c) / (1.0 - p_c).max(1e-30)).clamp(0.0, 1.0 - 1e-7),
+            ),
+            None => (None, u[0]),
+        };
         let defensive = u0.lt(p_def);
         // Defensive: half cosine, half uniform.
         let d = u0 / p_def;
@@ -612,11 +621,15 @@ impl Periodic {
             lobe_ok_dir.select(z, -1.0),
         ];
         let wo = std::array::from_fn(|c| defensive.select(def_dir[c], lobe_dir[c]));
-        let never = b.always();
-        Some(SampleProgram {
-            wo,
-            coherent: !never,
-        })
+        let (wo, coherent) = match coherent {
+            Some(coherent) => {
+                let mirror = [-wi[0], -wi[1], wi[2]];
+                let wo = std::array::from_fn(|c| coherent.select(mirror[c], wo[c]));
+                (wo, coherent)
+            }
+            None => (wo, !b.always()),
+        };
+        Some(SampleProgram { wo, coherent })
     }
 
     pub(super) fn density_program<'a>(
@@ -655,6 +668,11 @@ impl Periodic {
         let p_def = lobe_ok.select(DEFENSIVE_FRACTION, 1.0);
         let lobe = lobe_ok.select(lobe * (1.0 / total), 0.0);
         let density = p_def * defensive + (1.0 - p_def) * lobe * wo[2];
+        // The cover's mirror lobe takes its reflectance of the samples.
+        let density = match self.cover_program(b, wi[2]) {
+            Some(p_c) => (1.0 - p_c) * density,
+            None => density,
+        };
         Some(wo[2].gt(MIN_COS).select(density, 0.0))
     }
 
