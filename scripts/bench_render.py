@@ -51,14 +51,9 @@ MATERIALS = {
 MATERIALS.update({name + ', Stam\'s formula': dict(bsdf, energy='stam')
                   for name, bsdf in list(MATERIALS.items()) if bsdf['type'] == 'diffraction'})
 # The disc with rigorous orders (docs/rigorous.md; energy-exact by itself, no
-# "energy"): scalar variants only, the JIT variants have no programs for it.
+# "energy").
 MATERIALS['diffraction cd, rigorous orders'] = {'type': 'diffraction', 'surface': 'cd',
                                                  'orders': 'rigorous'}
-
-
-def runs_in(variant, bsdf):
-    """Whether `variant` renders `bsdf` (rigorous orders: scalar variants)."""
-    return bsdf.get('orders') != 'rigorous' or variant.startswith('scalar')
 
 
 def scene(mi, bsdf, size, spp):
@@ -124,7 +119,7 @@ def run_one(args):
     for variant in args.variants.split(','):
         # JIT variants in Mitsuba's default (symbolic) mode
         mi = stam_mitsuba.setup(variant)
-        materials = {n: b for n, b in MATERIALS.items() if runs_in(variant, b)}
+        materials = dict(MATERIALS)
         print('[bench_render] %s: %d interleaved rounds of %d renders...'
               % (variant, args.repeats, len(materials)), flush=True)
         best = time_renders(mi, materials, lambda bsdf: scene(mi, bsdf, args.size, args.spp),
@@ -195,7 +190,7 @@ def main():
              'to the same scene with `roughconductor` (Beckmann, alpha = 2 sigma / T = %.2f, Al) '
              'in the same variant and mode (JIT variants: Dr.Jit\'s default flags); each '
              'diffraction material with the default `"energy": "conserving"` and with Stam\'s '
-             'formula; the disc with rigorous orders in the scalar variants. Goals: at most 1.5x in '
+             'formula; the disc with rigorous orders. Goals: at most 1.5x in '
              'scalar variants, 2x in JIT variants.'
              % (args.spp, args.size, args.repeats, args.processes, time.strftime('%Y-%m-%d'),
                 max(args.processes, 1), args.repeats, 2 * SIGMA_UM / CORR_UM), '',
