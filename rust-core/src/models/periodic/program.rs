@@ -298,19 +298,8 @@ impl PeriodicSurface {
     }
 
     /// `kernel` as program operations, at wavenumber k taken from lambda
-    /// (nm): the orders of `orders_near`, each order's Gaussian exponent
-    /// from u P - n lambda (P the period in nm) with the product's rounding
-    /// error carried, so that the distance to a narrow peak keeps f32's
-    /// relative precision at high orders.
-    ///
-    /// The period and the coherence length are the program's parameters
-    /// (`Op::Param`): a renderer may change them (and differentiate). The
-    /// period as P = p_hi + p_lo: p_hi the built period's f32 value (a
-    /// constant), p_lo the built value's f64 residual plus the parameter's
-    /// change from its f32 value (exactly 0 at the build, in f32, and
-    /// carrying the derivative). The orders' count and the reach that picks
-    /// them stay the built ones: an order they miss after a change of a few
-    /// percent is beyond KERNEL_TAIL_EXPONENT.
+    /// (nm): the orders of `orders_near` (`order_sum_program`, the period
+    /// and the coherence length as parameters) with Stam's powers |c_n|^2.
     pub(super) fn kernel_program<'a>(
         &self,
         b: &'a Builder,
