@@ -329,10 +329,8 @@ impl PeriodicSurface {
                 _ => unreachable!("the powers are prepared for the profile"),
             }
         });
-        let OrderSum { sum, l, e_v, x } = sum;
-        let kernel = (k * l / w).sq() * (1.0 / PI) * sum;
-        let ok = k.gt(0.0) & w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
-        ok.select(kernel.finite_non_negative(), 0.0)
+        let kernel = (k * sum.l / w).sq() * (1.0 / PI) * sum.sum;
+        sum.valid(k, w).select(kernel.finite_non_negative(), 0.0)
     }
 
     /// sum over the orders near the pair of power(n) exp(-E_n) as the
@@ -428,13 +426,11 @@ impl PeriodicSurface {
             let place = grid.place(lambda_nm, (wo[0] - wi[0]) * 0.5, (wi[1] - wo[1]) * 0.5);
             move |n| grid.read_at(&place, n, |i| b.gather(table, i))
         });
-        let OrderSum { sum, l, e_v, x } = sum;
-        let mut f = (k * l).sq() * (1.0 / PI) * sum;
+        let mut f = (k * sum.l).sq() * (1.0 / PI) * sum.sum;
         if let Some(through) = cover_through_program(b, orders, pair) {
             f = f * through;
         }
-        let ok = k.gt(0.0) & pair.w.lt(0.0) & e_v.lt(EXP_UNDERFLOW) & x.finite();
-        Some(ok.select(f.finite_non_negative(), 0.0))
+        Some(sum.valid(k, pair.w).select(f.finite_non_negative(), 0.0))
     }
 }
 
@@ -477,6 +473,14 @@ pub(super) struct OrderSum<'a> {
     l: Value<'a>,
     e_v: Value<'a>,
     x: Value<'a>,
+}
+
+impl<'a> OrderSum<'a> {
+    /// Where the pair has a sum: k > 0, w < 0, e_v below underflow, a
+    /// finite order place (the kernels' test, `gaussian_sum`'s).
+    fn valid(&self, k: Value<'a>, w: Value<'a>) -> Mask<'a> {
+        k.gt(0.0) & w.lt(0.0) & self.e_v.lt(EXP_UNDERFLOW) & self.x.finite()
+    }
 }
 
 /// The profile's parameters as the spectral kernel reads them (`Op::Param`):
