@@ -64,6 +64,7 @@ mod rigorous_grid;
 #[cfg(test)]
 mod rigorous_tests;
 mod sampling;
+mod smoothed_weight;
 #[cfg(test)]
 mod tests;
 
