@@ -341,7 +341,7 @@ public:
     using IO = BatchIO<Float, Spectrum>;
     using Param = diffraction_detail::PluginParam<Float>; // a parameter forwarded to the core
     using Jit = JitPath<Float, Spectrum>;
-    using FloatStorage = typename Jit::FloatStorage;
+    using TableArrays = typename Jit::TableArrays;
 
     /// The plugin's own keys, which the core does not know, as a JSON array
     /// (the core lists them in an unknown key's message: stam_brdf_new_for_host).
@@ -595,7 +595,7 @@ public:
             oss << "," << std::endl << "  warnings = " << json_escape(m_warnings);
         if constexpr (dr::is_jit_v<Float>) {
             oss << "," << std::endl << "  jit_programs = ";
-            m_jit.describe(oss, dr::width(m_tables));
+            m_jit.describe(oss, dr::width(m_tables.values));
         }
         oss << std::endl << "]";
         return oss.str();
@@ -1138,7 +1138,7 @@ private:
     // JIT variants: the core's programs, and every program's tables in one
     // array (traversed, so that dr.freeze sees them)
     Jit m_jit;
-    FloatStorage m_tables;
+    TableArrays m_tables;
     // Every parameter the programs read (plugin_params.h)
     diffraction_detail::ParamArray<Float> m_param_array;
     // Changes of the programs, shown to dr.freeze (code_version.h)

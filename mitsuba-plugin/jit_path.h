@@ -34,7 +34,7 @@ template <typename Float, typename Spectrum> class JitPath {
 public:
     MI_IMPORT_TYPES()
     using Prog = program::Program<Float>;
-    using FloatStorage = DynamicBuffer<Float>;
+    using TableArrays = program::Tables<DynamicBuffer<Float>>;
     /// Values of the material's parameters (program.h's ParamInputs: by
     /// STAM_PARAM_* id, and per point where a texture gives one)
     using Params = program::ParamInputs<Float>;
@@ -117,13 +117,9 @@ public:
         return j;
     }
 
-    /// Every program's tables as one array (device memory on CUDA; never
-    /// empty), which the material keeps and traverses for dr.freeze.
-    FloatStorage load_tables() const {
-        std::vector<float> t = m_host_tables.buffer();
-        return t.empty() ? dr::zeros<FloatStorage>(1)
-                         : dr::load<FloatStorage>(t.data(), t.size());
-    }
+    /// Every program's tables (`program::Tables`), which the material keeps
+    /// and traverses for dr.freeze.
+    TableArrays load_tables() const { return TableArrays::load(m_host_tables); }
 
     /// The ids (STAM_PARAM_*) of the parameters the programs read: the
     /// material's parameters whose values flow into them (differentiable)
@@ -162,7 +158,7 @@ public:
     /// f(wi, wo) without cos (core frame), at each of the path's
     /// wavelengths (spectral) or in RGB
     UnpolarizedSpectrum f(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
-                          const FloatStorage &tables, const Params &params) const {
+                          const TableArrays &tables, const Params &params) const {
         if constexpr (IsSpectral) {
             UnpolarizedSpectrum f;
             for (size_t j = 0; j < NW; ++j)
@@ -179,7 +175,7 @@ public:
     /// The glossy density at wo; spectral: the density of the wavelengths'
     /// mixture (the core's MIXTURE_PDF)
     Float pdf(const Vector3f &wi, const Vector3f &wo, const Wavelength &wl,
-              const FloatStorage &tables, const Params &params) const {
+              const TableArrays &tables, const Params &params) const {
         return pick(m_pdf, m_pdf_at_built, params)
             .run(inputs(wi, &wo, wavelengths(wl)), tables, params)[0];
     }
@@ -189,7 +185,7 @@ public:
     /// sample1 picks one of the path's wavelengths)
     std::pair<Vector3f, Mask> sample(const Vector3f &wi, const Float &sample1,
                                      const Point2f &sample2, const Wavelength &wl,
-                                     const FloatStorage &tables, const Params &params) const {
+                                     const TableArrays &tables, const Params &params) const {
         std::vector<Float> extra{ sample1, sample2.x(), sample2.y() };
         for (const Float &l : wavelengths(wl))
             extra.push_back(l);
@@ -202,7 +198,7 @@ public:
     /// `sample` picks it (spectral: each wavelength's reflectance and the
     /// mixture's probability, MIXTURE_COHERENT)
     std::pair<UnpolarizedSpectrum, Float> coherent(const Vector3f &wi, const Wavelength &wl,
-                                                   const FloatStorage &tables,
+                                                   const TableArrays &tables,
                                                    const Params &params) const {
         std::vector<Float> o = pick(m_coherent, m_coherent_at_built, params)
                                    .run(inputs(wi, nullptr, wavelengths(wl)), tables, params);

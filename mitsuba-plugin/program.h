@@ -319,13 +319,9 @@ inline std::vector<float> export_mixture_program(const StamBrdf *b, uint32_t kin
 
 /// The host values of the tables of several programs, each distinct table
 /// once (programs of one material share some: the spectral Gaussian's eval
-/// and pdf read the same 281,502-value series table), loaded by the caller
-/// into one device array, which opens with a directory: per table of each
-/// program, where it starts and its last index (as the bits of a float).
-/// The programs read those from memory, not as constants of their code, so
-/// that two materials whose programs differ only in their tables' numbers
-/// and sizes trace to the same code, which Dr.Jit compiles once for both
-/// (a symbolic call traces every material alive; docs/jit.md).
+/// and pdf read the same 281,502-value series table), and a directory: per
+/// table of each program, where it starts and its last index. `Tables`
+/// loads both for Dr.Jit.
 class TableStorage {
 public:
     /// Where `n` values equal to `src` start in the storage (appended unless
@@ -360,23 +356,64 @@ public:
         return at;
     }
 
-    /// The array to load: the directory (each start moved past it), then
-    /// the tables' values
-    std::vector<float> buffer() const {
-        std::vector<float> out(m_dir.size() + m_values.size());
-        for (size_t k = 0; k < m_dir.size(); ++k) {
-            uint32_t v = m_dir[k] + (k % 2 == 0 ? (uint32_t) m_dir.size() : 0u);
-            std::memcpy(&out[k], &v, sizeof(v));
-        }
-        std::copy(m_values.begin(), m_values.end(), out.begin() + m_dir.size());
-        return out;
-    }
+    /// The tables' values, one after the other.
+    const std::vector<float> &values() const { return m_values; }
+    /// Per table of each program (`add_directory`): its start in
+    /// `values()`, then its last index.
+    const std::vector<uint32_t> &directory() const { return m_dir; }
     bool empty() const { return m_values.empty() && m_dir.empty(); }
 
 private:
     std::vector<float> m_values;
     std::vector<uint32_t> m_dir;
     std::unordered_multimap<uint64_t, std::pair<uint32_t, size_t>> m_index;
+};
+
+/// A TableStorage loaded for Dr.Jit: the tables' values in one array (device
+/// memory on CUDA; never empty), and each directory entry as an array of
+/// width 1 in memory. The programs read where a table starts and ends from
+/// those, not as constants of their code, so that two materials whose
+/// programs differ only in their tables' numbers and sizes trace to the same
+/// code, which Dr.Jit compiles once for both (a symbolic call traces every
+/// material alive, and passes such width-1 values to each material's code
+/// as its data; docs/jit.md). Read so, they cost a scalar load each; read
+/// from a directory array at a constant index, they were two vector gathers
+/// per table read (the disc's llvm_ad_rgb render took 3.6x roughconductor's
+/// time against 2.1x; docs/plugin_speed.md).
+/// `Buffer`: the array type of the values (Mitsuba's DynamicBuffer<Float>).
+template <typename Buffer> struct Tables {
+    using FloatD = dr::detached_t<Buffer>;
+    using UInt32D = dr::uint32_array_t<FloatD>;
+
+    Buffer values;
+    /// Per directory entry (table): its start in `values` and its last index.
+    std::vector<UInt32D> start;
+    std::vector<FloatD> last;
+
+    static Tables load(const TableStorage &storage) {
+        Tables out;
+        const std::vector<float> &v = storage.values();
+        out.values = v.empty() ? dr::zeros<Buffer>(1) : dr::load<Buffer>(v.data(), v.size());
+        const std::vector<uint32_t> &dir = storage.directory();
+        for (size_t k = 0; k + 1 < dir.size(); k += 2) {
+            out.start.push_back(dr::opaque<UInt32D>(dir[k]));
+            out.last.push_back(dr::opaque<FloatD>((float) dir[k + 1]));
+        }
+        return out;
+    }
+
+    void traverse_1_cb_ro(void *p, void (*fn)(void *, uint64_t, const char *,
+                                               const char *)) const {
+        dr::traverse_1_fn_ro(values, p, fn);
+        dr::traverse_1_fn_ro(start, p, fn);
+        dr::traverse_1_fn_ro(last, p, fn);
+    }
+    void traverse_1_cb_rw(void *p, uint64_t (*fn)(void *, uint64_t, const char *,
+                                                   const char *)) {
+        dr::traverse_1_fn_rw(values, p, fn);
+        dr::traverse_1_fn_rw(start, p, fn);
+        dr::traverse_1_fn_rw(last, p, fn);
+    }
 };
 
 /// A program ready to run with Dr.Jit arrays of type Float (an LLVM or CUDA
@@ -621,24 +658,19 @@ private:
 
     /// Table t at the index x: NaN to 0, clamped into [0, len - 1],
     /// truncated (the core's Op::Gather), so that no lane reads outside it.
-    /// Where the table starts and its last index come from the buffer's
-    /// directory (TableStorage), not from constants in the code.
+    /// Where the table starts and its last index come from memory
+    /// (`Tables`), not from constants in the code.
     template <typename Storage>
     static Float gather(const Code &code, uint32_t t, const Float &x, const Storage &tables) {
         if (code.table_len[t] == 0)
             return Float(0.f);
         using FloatD = dr::detached_t<Float>;
         using UInt32D = dr::uint32_array_t<FloatD>;
-        auto entry = [&](uint32_t k) {
-            return dr::reinterpret_array<UInt32D>(dr::gather<FloatD>(
-                dr::detach<false>(tables), UInt32D(code.dir_offset + 2 * t + k)));
-        };
-        UInt32D base = entry(0);
-        FloatD last = FloatD(entry(1));
+        size_t entry = code.dir_offset / 2 + t;
         FloatD xd = dr::detach<false>(x);
-        FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, last);
-        UInt32 idx = UInt32(UInt32D(xi) + base);
-        return dr::gather<Float>(tables, idx);
+        FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, tables.last[entry]);
+        UInt32 idx = UInt32(UInt32D(xi) + tables.start[entry]);
+        return dr::gather<Float>(tables.values, idx);
     }
 
     /// The decoded code (null for a default-constructed program), shared
