@@ -23,6 +23,7 @@
 #include <mitsuba/core/spectrum.h>
 #include <mitsuba/render/bsdf.h>
 #include <mitsuba/render/interaction.h>
+#include <mitsuba/render/mueller.h>
 #include <mitsuba/render/shape.h>
 #include <mitsuba/render/texture.h>
 
@@ -257,9 +258,12 @@ surfaces).
 
 The BSDF is one-sided, like Mitsuba's conductors: it reflects light arriving
 on the side the normal points to and is black from behind; wrap it in
-``twosided`` for sheets seen from both sides. Polarized variants run but
-depolarize (Stam's model is scalar): the result is the unpolarized value
-times a depolarizer. RGB variants receive the core's D65-weighted linear
+``twosided`` for sheets seen from both sides. In scalar_spectral_polarized
+the result is a Mueller matrix: the unpolarized value times the Fresnel
+reflection's polarization at the pair's half vector (from the core), in
+Mitsuba's Stokes bases, as roughconductor's (docs/polarisation.md); the JIT
+polarized variants and rigorous gratings still depolarize (the unpolarized
+value times a depolarizer). RGB variants receive the core's D65-weighted linear
 sRGB integral; colours purer than the sRGB primaries (the nearly
 monochromatic orders of gratings) are desaturated into the gamut at
 constant luminance, so RGB renders of gratings are paler than spectral ones.
@@ -538,14 +542,14 @@ public:
                                              Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFSample, active);
         Query q = make_query(ctx, si, nullptr, &sample1, &sample2, false, false, active);
-        return { q.bs, depolarizer<Spectrum>(q.weight) };
+        return { q.bs, as_spectrum(ctx, si, q.bs.wo, q.weight) };
     }
 
     Spectrum eval(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                   const Vector3f &wo, Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
-        return depolarizer<Spectrum>(
-            make_query(ctx, si, &wo, nullptr, nullptr, true, false, active).value);
+        return as_spectrum(ctx, si, wo,
+                           make_query(ctx, si, &wo, nullptr, nullptr, true, false, active).value);
     }
 
     Float pdf(const BSDFContext &ctx, const SurfaceInteraction3f &si,
@@ -560,7 +564,7 @@ public:
                                         Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFEvaluate, active);
         Query q = make_query(ctx, si, &wo, nullptr, nullptr, true, true, active);
-        return { depolarizer<Spectrum>(q.value), q.pdf };
+        return { as_spectrum(ctx, si, wo, q.value), q.pdf };
     }
 
     std::tuple<Spectrum, Float, BSDFSample3f, Spectrum>
@@ -569,8 +573,8 @@ public:
                     Mask active) const override {
         MI_MASKED_FUNCTION(ProfilerPhase::BSDFSample, active);
         Query q = make_query(ctx, si, &wo, &sample1, &sample2, true, true, active);
-        return { depolarizer<Spectrum>(q.value), q.pdf, q.bs,
-                 depolarizer<Spectrum>(q.weight) };
+        return { as_spectrum(ctx, si, wo, q.value), q.pdf, q.bs,
+                 as_spectrum(ctx, si, q.bs.wo, q.weight) };
     }
 
     std::string to_string() const override {
@@ -611,6 +615,66 @@ private:
         Tracks tracks = Tracks::Linear;
         bool tracks_given = false;
     };
+
+    /// The value (f cos, or a sample's weight) of the reflection from
+    /// si.wi to wo (local frame) as the variant's Spectrum. Polarized
+    /// variants: a Mueller matrix, the value times the core's polarisation
+    /// of the reflection (stam_brdf_polarization: the Fresnel reflection's
+    /// at the half vector, in the conventions of Mitsuba's
+    /// mueller::specular_reflection), its Stokes bases rotated into the
+    /// implicit ones of the directions the light travels along, as
+    /// Mitsuba's roughconductor does. The JIT polarized variants, and
+    /// materials without a polarisation (rigorous gratings), depolarize.
+    Spectrum as_spectrum(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                         const Vector3f &wo, const UnpolarizedSpectrum &value) const {
+        if constexpr (!is_polarized_v<Spectrum> || dr::is_jit_v<Float>) {
+            DRJIT_MARK_USED(ctx);
+            DRJIT_MARK_USED(si);
+            DRJIT_MARK_USED(wo);
+            return depolarizer<Spectrum>(value);
+        } else {
+            constexpr size_t NW = dr::size_v<UnpolarizedSpectrum>;
+            Vector3f sum = si.wi + wo;
+            if (!m_core || !(dr::squared_norm(sum) > 0.f))
+                return depolarizer<Spectrum>(value);
+            float wi3[3 * NW], wo3[3 * NW], lambda[NW], pol[3 * NW];
+            for (size_t j = 0; j < NW; ++j) {
+                for (size_t d = 0; d < 3; ++d) {
+                    wi3[3 * j + d] = si.wi[d];
+                    wo3[3 * j + d] = wo[d];
+                }
+                lambda[j] = si.wavelengths[j];
+            }
+            if (!stam_brdf_polarization(m_core.get(), NW, wi3, wo3, lambda, pol))
+                return depolarizer<Spectrum>(value);
+            UnpolarizedSpectrum vb, vc, vs, zero(0.f);
+            for (size_t j = 0; j < NW; ++j) {
+                vb[j] = value[j] * pol[3 * j];
+                vc[j] = value[j] * pol[3 * j + 1];
+                vs[j] = value[j] * pol[3 * j + 2];
+            }
+            Spectrum m(value, vb, zero, zero,
+                       vb, value, zero, zero,
+                       zero, zero, vc, vs,
+                       zero, zero, -vs, vc);
+            // The light arrives along -towards and leaves along away (which
+            // of wi and wo is which follows the transport mode).
+            bool radiance = ctx.mode == TransportMode::Radiance;
+            Vector3f towards = radiance ? wo : si.wi, away = radiance ? si.wi : wo;
+            Vector3f h = dr::normalize(sum);
+            // The matrix's s axes: normal to the plane of reflection; along
+            // the normal (no plane), any axis.
+            Vector3f s_in = dr::cross(h, -towards), s_out = dr::cross(h, away);
+            if (dr::squared_norm(s_in) > 0.f && dr::squared_norm(s_out) > 0.f) {
+                s_in = dr::normalize(s_in);
+                s_out = dr::normalize(s_out);
+            } else {
+                s_in = s_out = Vector3f(1.f, 0.f, 0.f);
+            }
+            return mueller::rotate_mueller_basis(m, -towards, s_in, mueller::stokes_basis(-towards),
+                                                 away, s_out, mueller::stokes_basis(away));
+        }
+    }
 
     /// A core material built from the current parameters, not yet in use
     struct Core {

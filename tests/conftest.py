@@ -28,6 +28,7 @@ COLD_SECONDS = {
     'test_compare.py': 25,  # 2026-12-05: 39.5 s cold on the AMD, where it was 15.7
     'test_wheel.py': 20,
     'test_core_binding.py': 17,
+    'test_polarization.py': 5,  # 2026-12-06: 3.3 s warm (scalar variants)
     'test_rigorous.py': 10,  # 2026-12-05: 7-15 s by load, 2 cores (grcwa; no Dr.Jit)
     'test_animation.py': 8,
 }

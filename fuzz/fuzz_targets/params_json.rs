@@ -63,6 +63,11 @@ fuzz_target!(|data: &[u8]| {
         assert!(ok(&out[..n]));
         stam_brdf_coherent_rgb(p, n, wi.as_ptr(), out.as_mut_ptr());
         assert!(ok(&out));
+        let has = stam_brdf_polarization(p, n, wi.as_ptr(), wo.as_ptr(), lam.as_ptr(), out.as_mut_ptr());
+        for v in out.chunks_exact(3) {
+            let q: f32 = v.iter().map(|x| x * x).sum();
+            assert!(q.is_finite() && if has == 1 { (q - 1.0).abs() < 1e-4 } else { q == 0.0 });
+        }
         for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
             stam_brdf_sample(p, n, wi.as_ptr(), lam_ptr, rnd.as_ptr(), out.as_mut_ptr(), pdf.as_mut_ptr(), coh.as_mut_ptr());
             assert!(ok(&pdf));

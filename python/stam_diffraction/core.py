@@ -195,6 +195,7 @@ def lib():
         'stam_brdf_free': (None, [vp]),
         'stam_brdf_eval_spectral': (None, [vp, sz, fp, fp, fp, fp]),
         'stam_brdf_eval_rgb': (None, [vp, sz, fp, fp, fp]),
+        'stam_brdf_polarization': (ctypes.c_int, [vp, sz, fp, fp, fp, fp]),
         'stam_brdf_coherent_spectral': (None, [vp, sz, fp, fp, fp]),
         'stam_brdf_coherent_rgb': (None, [vp, sz, fp, fp]),
         'stam_brdf_sample': (None, [vp, sz, fp, fp, fp, fp, fp, u8p]),
@@ -417,6 +418,24 @@ class Brdf:
             self._handle(), n, _ptr(self._lanes(wi, shape, n, (3,))),
             _ptr(self._lanes(wo, shape, n, (3,))), _ptr(self._lanes(lam, shape, n)), _ptr(out))
         return out.astype(np.float64).reshape(shape)
+
+    def polarization(self, wi, wo, lambda_nm):
+        """The polarisation of the reflection from wi to wo at lambda
+        (stam_brdf_polarization): (b, c, s), shape (..., 3), of its Mueller
+        matrix over the unpolarised value, [[1, b, 0, 0], [b, 1, 0, 0],
+        [0, 0, c, s], [0, 0, -s, c]] in the conventions of Mitsuba's
+        mueller.specular_reflection; None for a material without one
+        (rigorous gratings)."""
+        wi, wo = _vectors(wi, 'wi'), _vectors(wo, 'wo')
+        lam = np.asarray(lambda_nm, dtype=np.float64)
+        shape, n = self._batch(wi.shape[:-1], wo.shape[:-1], lam.shape)
+        out = np.zeros((n, 3), np.float32)
+        has = self._lib.stam_brdf_polarization(
+            self._handle(), n, _ptr(self._lanes(wi, shape, n, (3,))),
+            _ptr(self._lanes(wo, shape, n, (3,))), _ptr(self._lanes(lam, shape, n)), _ptr(out))
+        if not has and n:
+            return None
+        return out.astype(np.float64).reshape(shape + (3,))
 
     def coherent_rgb(self, wi):
         """Reflectance of the coherent (mirror) delta lobe in linear sRGB: (..., 3)."""

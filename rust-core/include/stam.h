@@ -50,6 +50,21 @@ void stam_brdf_eval_spectral(const StamBrdf *b, size_t n, const float *wi, const
 void stam_brdf_eval_rgb(const StamBrdf *b, size_t n, const float *wi, const float *wo,
                         float *out_rgb);
 
+/* The polarisation of the reflection from wi to wo at lambda_nm (one
+ * wavelength per pair): (b, c, s), 3 floats per pair, of the reflection's
+ * Mueller matrix divided by its unpolarised value,
+ * [[1, b, 0, 0], [b, 1, 0, 0], [0, 0, c, s], [0, 0, -s, c]], in the
+ * conventions of Mitsuba's mueller::specular_reflection (Stokes bases
+ * perpendicular to the plane of incidence of wi on the pair's half vector;
+ * the host rotates them into its own). b^2 + c^2 + s^2 = 1. Surfaces whose
+ * value is F^2 G K give the Fresnel reflection's at the half vector (a
+ * constant reflectance: a perfect conductor's, (0, -1, 0)). Returns 1; 0
+ * with out zero-filled for a NULL argument or a material without such a
+ * polarisation (rigorous gratings, whose orders' polarisation is not
+ * exported yet). */
+int stam_brdf_polarization(const StamBrdf *b, size_t n, const float *wi, const float *wo,
+                           const float *lambda_nm, float *out);
+
 /* Reflectance of the coherent (mirror) delta lobe: F^2 exp(-g) for Gaussian
  * surfaces, 0 otherwise. */
 void stam_brdf_coherent_spectral(const StamBrdf *b, size_t n, const float *wi,

@@ -281,6 +281,38 @@ pub unsafe extern "C" fn stam_brdf_coherent_rgb(
     });
 }
 
+/// # Safety
+/// wi, wo and out hold 3n floats, lambda_nm n; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_polarization(
+    b: *const StamBrdf,
+    n: usize,
+    wi: *const f32,
+    wo: *const f32,
+    lambda_nm: *const f32,
+    out: *mut f32,
+) -> i32 {
+    let ok = !wi.is_null() && !wo.is_null() && !lambda_nm.is_null();
+    if b.is_null() || out.is_null() || !ok {
+        batch(b, n, out, 3, false, |_, _, _| {});
+        return 0;
+    }
+    if n > 0 && (*b).brdf.polarization(DVec3::Z, DVec3::Z, 550.0).is_none() {
+        batch(b, n, out, 3, false, |_, _, _| {});
+        return 0;
+    }
+    batch(b, n, out, 3, true, |brdf, i, o| {
+        let lambda = *lambda_nm.add(i) as f64;
+        let p = brdf
+            .polarization(direction(wi, i), direction(wo, i), lambda)
+            .unwrap_or([0.0, -1.0, 0.0]);
+        for (o, v) in o.iter_mut().zip(p) {
+            *o = v as f32;
+        }
+    });
+    1
+}
+
 #[inline]
 unsafe fn optional_lambda(lambda_nm: *const f32, i: usize) -> Option<f64> {
     if lambda_nm.is_null() {

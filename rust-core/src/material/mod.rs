@@ -245,6 +245,21 @@ impl Brdf {
         self.fresnel.at_cos(geom.cos_half)
     }
 
+    /// The polarisation of the reflection from wi to wo at lambda: the
+    /// Fresnel reflection's at the pair's half vector
+    /// (`Fresnel::polarization`), (b, c, s) of its Mueller matrix over the
+    /// unpolarised value, in Mitsuba's conventions. None for a model whose
+    /// f is its own (rigorous gratings: the polarisation of their orders
+    /// is not exported yet). A pair without a geometry (a direction below
+    /// the horizon, where f is 0) takes normal incidence's.
+    pub fn polarization(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> Option<[f64; 3]> {
+        if self.surface.is_unfactored() {
+            return None;
+        }
+        let cos_half = PairGeometry::new(wi, wo).map_or(1.0, |g| g.cos_half);
+        Some(self.fresnel.polarization(cos_half, lambda_nm))
+    }
+
     /// f(wi, wo; lambda) in 1/sr without the coherent lobe and without cos.
     pub fn eval_spectral(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
         if !in_band(lambda_nm) {

@@ -78,6 +78,21 @@ impl Fresnel {
         }
     }
 
+    /// The polarisation of the reflection at local incidence cosine
+    /// `cos_theta` and wavelength (`conductor_polarization`): (b, c, s) of
+    /// its Mueller matrix over the unpolarised reflectance. A constant
+    /// reflectance has no index: it reflects as a perfect conductor.
+    pub fn polarization(&self, cos_theta: f64, lambda_nm: f64) -> [f64; 3] {
+        match self {
+            Fresnel::Constant(_) => [0.0, -1.0, 0.0],
+            Fresnel::ComplexIndex { eta, k } => conductor_polarization(cos_theta, *eta, *k),
+            Fresnel::Metal { table, .. } => {
+                let (eta, k) = metal_index(table, lambda_nm);
+                conductor_polarization(cos_theta, eta, k)
+            }
+        }
+    }
+
     /// True when the reflectance does not depend on wavelength.
     pub fn is_spectrally_flat(&self) -> bool {
         !matches!(self, Fresnel::Metal { .. })
@@ -513,6 +528,70 @@ where
     T::select(r.finite(), r.clamp(0.0, 1.0), r.constant(1.0))
 }
 
+/// The polarisation of specular reflection at a conductor with index
+/// eta + i k (k = 0: a dielectric seen from outside): the Mueller matrix of
+/// the reflection, in the conventions of Mitsuba's
+/// `mueller::specular_reflection` (Stokes bases perpendicular to the plane
+/// of incidence), divided by its [0][0] element (the unpolarised
+/// reflectance, `conductor_reflectance`). Returns (b, c, s) of
+/// [[1, b, 0, 0], [b, 1, 0, 0], [0, 0, c, s], [0, 0, -s, c]].
+///
+/// With w = sqrt(n^2 - sin^2) (principal root), the amplitudes
+/// r_s = (cos - w) / (cos + w) and r_p = (n^2 cos - w) / (n^2 cos + w), and
+/// X = r_s conj(r_p): b = (|r_s|^2 - |r_p|^2) / D, c = 2 Re X / D and
+/// s = -2 Im X / D with D = |r_s|^2 + |r_p|^2, so that b^2 + c^2 + s^2 = 1
+/// (a reflection does not depolarise). Each amplitude is kept as its
+/// numerator over its denominator, both scaled by the product of the
+/// denominators' norms, so that nothing is divided but D. In real
+/// arithmetic, written once for native code and programs. A cosine that is
+/// not finite reads as 0; where D is 0 or not finite (an index of 1, a NaN
+/// index), a perfect conductor's (0, -1, 0), which is also what a
+/// reflectance without an index (`Fresnel::Constant`) takes.
+pub fn conductor_polarization<T: Real>(cos_theta: T, eta: T, k: T) -> [T; 3]
+where
+    f64: Sub<T, Output = T>,
+{
+    let c = T::select(cos_theta.finite(), cos_theta, cos_theta.constant(0.0)).clamp(0.0, 1.0);
+    let s2 = 1.0 - c * c;
+    // n^2 = nr + i ni; z = n^2 - sin^2 and w = sqrt(z) = wr + i wi (ni >= 0)
+    let (nr, ni) = (eta * eta - k * k, eta * k * 2.0);
+    let zr = nr - s2;
+    let z_abs = (zr * zr + ni * ni).sqrt();
+    let wr = ((z_abs + zr) * 0.5).max(0.0).sqrt();
+    let wi = ((z_abs - zr) * 0.5).max(0.0).sqrt();
+    // r_s = Ns / Ds, r_p = Np / Dp
+    let (ns_r, ns_i) = (c - wr, wi * -1.0);
+    let (ds_r, ds_i) = (c + wr, wi);
+    let (np_r, np_i) = (nr * c - wr, ni * c - wi);
+    let (dp_r, dp_i) = (nr * c + wr, ni * c + wi);
+    let norm = |re: T, im: T| re * re + im * im;
+    let (ds2, dp2) = (norm(ds_r, ds_i), norm(dp_r, dp_i));
+    // |r_s|^2, |r_p|^2 and X times |Ds|^2 |Dp|^2: X = Ns conj(Np) conj(Ds) Dp
+    let rs2 = norm(ns_r, ns_i) * dp2;
+    let rp2 = norm(np_r, np_i) * ds2;
+    let (a_r, a_i) = (ns_r * np_r + ns_i * np_i, ns_i * np_r - ns_r * np_i);
+    let (e_r, e_i) = (ds_r * dp_r + ds_i * dp_i, ds_r * dp_i - ds_i * dp_r);
+    let (x_r, x_i) = (a_r * e_r - a_i * e_i, a_r * e_i + a_i * e_r);
+    let d = rs2 + rp2;
+    let ok = d.finite() & d.gt(0.0);
+    let inv = T::select(
+        ok,
+        d.constant(1.0) / T::select(ok, d, d.constant(1.0)),
+        d.constant(0.0),
+    );
+    let b = (rs2 - rp2) * inv;
+    let cc = x_r * inv * 2.0;
+    let ss = x_i * inv * -2.0;
+    let zero = b.constant(0.0);
+    let fin = b.finite() & cc.finite() & ss.finite();
+    let ok = ok & fin;
+    [
+        T::select(ok, b, zero),
+        T::select(ok, cc, zero.constant(-1.0)),
+        T::select(ok, ss, zero),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -583,6 +662,95 @@ mod tests {
         // Normal incidence closed form ((n-1)^2 + k^2)/((n+1)^2 + k^2).
         let r = conductor_reflectance(1.0, 1.2, 7.0);
         assert!((r - (0.04 + 49.0) / (4.84 + 49.0)).abs() < 1e-12);
+    }
+
+    /// The polarisation (b, c, s) against the complex amplitudes r_s and
+    /// r_p written directly (num_complex; the conventions of Mitsuba's
+    /// `mueller::specular_reflection`, checked against it in
+    /// tests/test_polarization.py), over cosines and indices of metals and
+    /// dielectrics: within 1e-9; b^2 + c^2 + s^2 = 1 within 1e-12 (a
+    /// reflection does not depolarise); the reference's [0][0] is
+    /// `conductor_reflectance`.
+    #[test]
+    fn polarization_matches_complex_amplitudes() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut worst = 0.0f64;
+        for i in 0..20_000 {
+            let c = if i % 100 == 0 { 0.0 } else { uniform() };
+            let eta = 0.05 + 4.0 * uniform();
+            let k = if i % 5 == 0 { 0.0 } else { 12.0 * uniform() };
+            let n = Complex64::new(eta, k);
+            let w = (n * n - (1.0 - c * c)).sqrt();
+            let rs = (c - w) / (c + w);
+            let rp = (n * n * c - w) / (n * n * c + w);
+            let d = rs.norm_sqr() + rp.norm_sqr();
+            let x = rs * rp.conj();
+            let want = [
+                (rs.norm_sqr() - rp.norm_sqr()) / d,
+                2.0 * x.re / d,
+                -2.0 * x.im / d,
+            ];
+            let got = conductor_polarization(c, eta, k);
+            for (g, w) in got.iter().zip(want) {
+                worst = worst.max((g - w).abs());
+            }
+            let sum: f64 = got.iter().map(|v| v * v).sum();
+            assert!(
+                (sum - 1.0).abs() < 1e-12,
+                "cos {c} eta {eta} k {k}: {got:?}"
+            );
+            let a = 0.5 * d;
+            assert!((a - conductor_reflectance(c, eta, k)).abs() < 1e-10);
+        }
+        assert!(worst < 1e-9, "worst {worst}");
+        // No index to speak of, or none at all: a perfect conductor's.
+        for (c, eta, k) in [
+            (0.5, 1.0, 0.0),
+            (0.5, f64::NAN, 1.0),
+            (0.5, 1.0, f64::INFINITY),
+        ] {
+            assert_eq!(conductor_polarization(c, eta, k), [0.0, -1.0, 0.0]);
+        }
+        assert_eq!(
+            Fresnel::Constant(0.9).polarization(0.3, 500.0),
+            [0.0, -1.0, 0.0]
+        );
+        // A cosine that is not finite reads as grazing.
+        assert_eq!(
+            conductor_polarization(f64::NAN, 1.2, 6.9),
+            conductor_polarization(0.0, 1.2, 6.9)
+        );
+    }
+
+    /// Written once (`Real`): the polarisation's program, run in f64, gives
+    /// the native values bit for bit.
+    #[test]
+    fn polarization_program_is_the_native_formula() {
+        use crate::program::Builder;
+        let b = Builder::new();
+        let (cos, eta, k) = (b.input(), b.input(), b.input());
+        let program = b.finish(&conductor_polarization(cos, eta, k));
+        for &(eta, k) in &[
+            (1.5, 0.0),
+            (0.2, 3.9),
+            (1.1, 6.7),
+            (1.0, 0.0),
+            (f64::NAN, 1.0),
+        ] {
+            for c in [-0.5, 0.0, 1e-9, 0.3, 0.99, 1.0, 1.5, f64::NAN] {
+                let native = conductor_polarization(c, eta, k);
+                let run = program.run(&[c, eta, k]);
+                for (x, y) in native.iter().zip(&run) {
+                    assert_eq!(x.to_bits(), y.to_bits(), "cos {c} eta {eta} k {k}");
+                }
+            }
+        }
     }
 
     /// The tabulated metal reflectance against the direct evaluation from

@@ -7,7 +7,7 @@
 //! one written by hand before, the native values those of the f64 code.
 
 use super::builder::{Mask, Value};
-use std::ops::{Add, Div, Mul, Sub};
+use std::ops::{Add, BitAnd, Div, Mul, Sub};
 
 /// A number of a formula written once (`f64` natively, `Value` in a
 /// program).
@@ -23,7 +23,7 @@ pub trait Real:
     + Div<f64, Output = Self>
 {
     /// A comparison's or a check's outcome (`bool` natively).
-    type Mask: Copy;
+    type Mask: Copy + BitAnd<Output = Self::Mask>;
     /// The constant `x` in the computation `self` belongs to.
     fn constant(self, x: f64) -> Self;
     fn sqrt(self) -> Self;

@@ -379,6 +379,23 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
     CHECK(10, finite_nonneg(out, N), "coherent_spectral");
     stam_brdf_coherent_rgb(b, N, wi, rgb);
     CHECK(11, finite_nonneg(rgb, 3 * N), "coherent_rgb");
+    {
+        /* Polarisation (b, c, s): finite at every lane, b^2 + c^2 + s^2 = 1
+         * where the material has it (1), zeros where it has none (0:
+         * rigorous gratings); 0 and zeros for a NULL material. */
+        float pol[3 * N];
+        int has = stam_brdf_polarization(b, N, wi, wo, lambda, pol);
+        for (int i = 0; i < N; ++i) {
+            float q = pol[3 * i] * pol[3 * i] + pol[3 * i + 1] * pol[3 * i + 1] +
+                      pol[3 * i + 2] * pol[3 * i + 2];
+            CHECK(75, isfinite(q) && (has ? fabsf(q - 1.0f) < 1e-4f : q == 0.0f),
+                  "polarization lane %d: (%g, %g, %g), returned %d", i, pol[3 * i],
+                  pol[3 * i + 1], pol[3 * i + 2], has);
+        }
+        CHECK(76, stam_brdf_polarization(NULL, N, wi, wo, lambda, pol) == 0 && pol[0] == 0.0f &&
+                      stam_brdf_polarization(b, N, NULL, wo, lambda, pol) == 0,
+              "polarization of a NULL material or direction");
+    }
 
     stam_brdf_sample(b, N, wi, lambda, rnd, wo_s, pdf, coherent);
     CHECK(12, finite_nonneg(pdf, N), "sample pdf");

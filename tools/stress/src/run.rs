@@ -88,6 +88,10 @@ pub struct Report {
     pub pdf_mismatches: u64,
     pub f_positive_pdf_zero: u64,
     pub bad_coherent_probability: u64,
+    /// Polarisation (b, c, s) not finite, off the unit sphere, a material
+    /// with it through one path and not the other, or the ABI's apart from
+    /// the Rust API's.
+    pub bad_polarization: u64,
     /// stam_version returned NULL, an empty string or one that is not UTF-8.
     pub bad_version: u64,
     /// Materials with plausibility warnings (stam_brdf_warnings non-empty).
@@ -128,6 +132,7 @@ impl Report {
             + self.pdf_mismatches
             + self.f_positive_pdf_zero
             + self.bad_coherent_probability
+            + self.bad_polarization
             + self.bad_version
             + self.bad_warnings
             + self.bad_params_json
@@ -241,6 +246,10 @@ impl Report {
             (
                 "coherent probability outside [0, 1]",
                 self.bad_coherent_probability.to_string(),
+            ),
+            (
+                "polarisation not finite, not unit, or apart between ABI and Rust",
+                self.bad_polarization.to_string(),
             ),
             ("programs exported", self.programs.to_string()),
             ("  lanes run (f32 executor)", self.program_runs.to_string()),
@@ -524,6 +533,44 @@ pub fn run(options: &Options) -> Report {
             report.evaluations_abi += n as u64;
             report.evaluations_rust += n as u64;
         }
+
+        // Polarisation: finite, b^2 + c^2 + s^2 = 1, the ABI's the Rust
+        // API's (f32 against f64, absolutely: values lie in [-1, 1]).
+        let has = unsafe {
+            ffi::stam_brdf_polarization(
+                b,
+                n,
+                wi32.as_ptr(),
+                wo32.as_ptr(),
+                lam32.as_ptr(),
+                out3.as_mut_ptr(),
+            )
+        };
+        for i in 0..n {
+            let rust = brdf.polarization(wi_r[i], wo_r[i], lam_r[i]);
+            let abi = &out3[3 * i..3 * i + 3];
+            let unit = |v: [f64; 3], tol: f64| {
+                v.iter().all(|x| x.is_finite())
+                    && (v.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() <= tol
+            };
+            let abi64 = [abi[0] as f64, abi[1] as f64, abi[2] as f64];
+            let ok = match rust {
+                Some(r) => {
+                    has == 1
+                        && unit(r, 1e-9)
+                        && unit(abi64, 1e-4)
+                        && r.iter().zip(abi64).all(|(x, y)| (x - y).abs() <= 1e-5)
+                }
+                None => has == 0 && abi.iter().all(|&x| x == 0.0),
+            };
+            if !ok {
+                report.bad_polarization += 1;
+                let w = ctx("polarization", i)();
+                report.fail(format!("{w}: ABI {abi:?} ({has}), Rust {rust:?}"));
+            }
+        }
+        report.evaluations_abi += n as u64;
+        report.evaluations_rust += n as u64;
 
         // Sampling through the ABI, spectral and RGB mode, with the pdf at
         // the returned direction, and through the Rust API at the unrounded

@@ -165,6 +165,28 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
         check("coherent_spectral", &out[..n])?;
         stam_brdf_coherent_rgb(p, n, wi.as_ptr(), out.as_mut_ptr());
         check("coherent_rgb", &out)?;
+        // Polarisation: finite, on the unit sphere where the material has
+        // one, zeros where it has none.
+        let has = stam_brdf_polarization(
+            p,
+            n,
+            wi.as_ptr(),
+            wo.as_ptr(),
+            lam.as_ptr(),
+            out.as_mut_ptr(),
+        );
+        for v in out.chunks_exact(3) {
+            let q: f32 = v.iter().map(|x| x * x).sum();
+            if !(q.is_finite()
+                && if has == 1 {
+                    (q - 1.0).abs() < 1e-4
+                } else {
+                    q == 0.0
+                })
+            {
+                return Err(format!("polarization gave {v:?} (returned {has})"));
+            }
+        }
         for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
             stam_brdf_sample(
                 p,
