@@ -258,12 +258,12 @@ surfaces).
 
 The BSDF is one-sided, like Mitsuba's conductors: it reflects light arriving
 on the side the normal points to and is black from behind; wrap it in
-``twosided`` for sheets seen from both sides. In scalar_spectral_polarized
-the result is a Mueller matrix: the unpolarized value times the Fresnel
-reflection's polarization at the pair's half vector (from the core), in
-Mitsuba's Stokes bases, as roughconductor's (docs/polarisation.md); the JIT
-polarized variants and rigorous gratings still depolarize (the unpolarized
-value times a depolarizer). RGB variants receive the core's D65-weighted linear
+``twosided`` for sheets seen from both sides. In polarized variants the
+result is a Mueller matrix: the unpolarized value times the Fresnel
+reflection's polarization at the pair's half vector (from the core: natively
+in scalar variants, its program in JIT ones), in Mitsuba's Stokes bases, as
+roughconductor's (docs/polarisation.md); rigorous gratings still depolarize
+(the unpolarized value times a depolarizer). RGB variants receive the core's D65-weighted linear
 sRGB integral; colours purer than the sRGB primaries (the nearly
 monochromatic orders of gratings) are desaturated into the gamut at
 constant luminance, so RGB renders of gratings are paler than spectral ones.
@@ -627,50 +627,58 @@ private:
     /// materials without a polarisation (rigorous gratings), depolarize.
     Spectrum as_spectrum(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                          const Vector3f &wo, const UnpolarizedSpectrum &value) const {
-        if constexpr (!is_polarized_v<Spectrum> || dr::is_jit_v<Float>) {
+        if constexpr (!is_polarized_v<Spectrum>) {
             DRJIT_MARK_USED(ctx);
             DRJIT_MARK_USED(si);
             DRJIT_MARK_USED(wo);
             return depolarizer<Spectrum>(value);
         } else {
-            constexpr size_t NW = dr::size_v<UnpolarizedSpectrum>;
             Vector3f sum = si.wi + wo;
-            if (!m_core || !(dr::squared_norm(sum) > 0.f))
-                return depolarizer<Spectrum>(value);
-            float wi3[3 * NW], wo3[3 * NW], lambda[NW], pol[3 * NW];
-            for (size_t j = 0; j < NW; ++j) {
-                for (size_t d = 0; d < 3; ++d) {
-                    wi3[3 * j + d] = si.wi[d];
-                    wo3[3 * j + d] = wo[d];
+            // (b, c, s) per wavelength
+            std::array<UnpolarizedSpectrum, 3> pol;
+            if constexpr (dr::is_jit_v<Float>) {
+                if (!m_jit.has_polarization())
+                    return depolarizer<Spectrum>(value);
+                typename Jit::Params params{ m_param_array.array(), {} };
+                m_textures.apply(params, si, Mask(true));
+                params.at_built = m_param_array.at_built() && !params.any_per_point();
+                pol = m_jit.polarization(si.wi, wo, si.wavelengths, m_tables, params);
+            } else {
+                constexpr size_t NW = dr::size_v<UnpolarizedSpectrum>;
+                if (!m_core || !(dr::squared_norm(sum) > 0.f))
+                    return depolarizer<Spectrum>(value);
+                float wi3[3 * NW], wo3[3 * NW], lambda[NW], out[3 * NW];
+                for (size_t j = 0; j < NW; ++j) {
+                    for (size_t d = 0; d < 3; ++d) {
+                        wi3[3 * j + d] = si.wi[d];
+                        wo3[3 * j + d] = wo[d];
+                    }
+                    lambda[j] = si.wavelengths[j];
                 }
-                lambda[j] = si.wavelengths[j];
+                if (!stam_brdf_polarization(m_core.get(), NW, wi3, wo3, lambda, out))
+                    return depolarizer<Spectrum>(value);
+                for (size_t j = 0; j < NW; ++j)
+                    for (size_t c = 0; c < 3; ++c)
+                        pol[c][j] = out[3 * j + c];
             }
-            if (!stam_brdf_polarization(m_core.get(), NW, wi3, wo3, lambda, pol))
-                return depolarizer<Spectrum>(value);
-            UnpolarizedSpectrum vb, vc, vs, zero(0.f);
-            for (size_t j = 0; j < NW; ++j) {
-                vb[j] = value[j] * pol[3 * j];
-                vc[j] = value[j] * pol[3 * j + 1];
-                vs[j] = value[j] * pol[3 * j + 2];
-            }
+            UnpolarizedSpectrum vb = value * pol[0], vc = value * pol[1], vs = value * pol[2],
+                                zero(0.f);
             Spectrum m(value, vb, zero, zero,
                        vb, value, zero, zero,
                        zero, zero, vc, vs,
                        zero, zero, -vs, vc);
             // The light arrives along -towards and leaves along away (which
             // of wi and wo is which follows the transport mode).
-            bool radiance = ctx.mode == TransportMode::Radiance;
-            Vector3f towards = radiance ? wo : si.wi, away = radiance ? si.wi : wo;
+            Mask radiance = Mask(ctx.mode == TransportMode::Radiance);
+            Vector3f towards = dr::select(radiance, wo, si.wi),
+                     away = dr::select(radiance, si.wi, wo);
             Vector3f h = dr::normalize(sum);
             // The matrix's s axes: normal to the plane of reflection; along
-            // the normal (no plane), any axis.
+            // the normal (no plane), or where wi + wo is 0 (f is 0), any axis.
             Vector3f s_in = dr::cross(h, -towards), s_out = dr::cross(h, away);
-            if (dr::squared_norm(s_in) > 0.f && dr::squared_norm(s_out) > 0.f) {
-                s_in = dr::normalize(s_in);
-                s_out = dr::normalize(s_out);
-            } else {
-                s_in = s_out = Vector3f(1.f, 0.f, 0.f);
-            }
+            Mask planar = dr::squared_norm(s_in) > 0.f && dr::squared_norm(s_out) > 0.f;
+            s_in = dr::select(planar, dr::normalize(s_in), Vector3f(1.f, 0.f, 0.f));
+            s_out = dr::select(planar, dr::normalize(s_out), Vector3f(1.f, 0.f, 0.f));
             return mueller::rotate_mueller_basis(m, -towards, s_in, mueller::stokes_basis(-towards),
                                                  away, s_out, mueller::stokes_basis(away));
         }

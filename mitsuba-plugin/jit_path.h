@@ -109,6 +109,21 @@ public:
             throw ParamError(std::string("the core's program is unusable (a plugin built "
                                          "against another core?): ") + e.what());
         }
+        // Polarized variants: the polarisation's program, where the material
+        // has one (wi, wo, lambda -> b, c, s)
+        if constexpr (is_polarized_v<Spectrum>) {
+            std::vector<float> v = program::export_polarization_program(core);
+            if (!v.empty()) {
+                j.m_polarization = Prog(v, j.m_host_tables);
+                if (j.m_polarization.n_inputs() != 7 || j.m_polarization.n_outputs() != 3)
+                    throw ParamError("the core's polarization program takes " +
+                                     std::to_string(j.m_polarization.n_inputs()) +
+                                     " inputs and gives " +
+                                     std::to_string(j.m_polarization.n_outputs()) +
+                                     " outputs, not 7 and 3 (a plugin built against another "
+                                     "core?)");
+            }
+        }
         if (!missing.empty())
             throw ParamError("the core exports no program of kind " + missing +
                              " for this material, which the JIT variants run; render it "
@@ -212,6 +227,31 @@ public:
         }
     }
 
+    /// Polarized variants: whether the material has a polarisation (not
+    /// rigorous gratings), and its (b, c, s) for the reflection from wi to
+    /// wo (any frame: the program reads the half vector's cosine) at each of
+    /// the path's wavelengths (monochromatic variants: at 550 nm), from the
+    /// core's program (stam_brdf_export_polarization_program)
+    bool has_polarization() const { return m_polarization.valid(); }
+    std::array<UnpolarizedSpectrum, 3> polarization(const Vector3f &wi, const Vector3f &wo,
+                                                    const Wavelength &wl,
+                                                    const TableArrays &tables,
+                                                    const Params &params) const {
+        std::array<UnpolarizedSpectrum, 3> out;
+        for (size_t j = 0; j < dr::size_v<UnpolarizedSpectrum>; ++j) {
+            Float lambda;
+            if constexpr (IsSpectral)
+                lambda = wl[j];
+            else
+                lambda = Float(550.f);
+            std::vector<Float> o = m_polarization.run(inputs(wi, &wo, { lambda }), tables, params);
+            for (size_t c = 0; c < 3; ++c)
+                out[c][j] = o[c];
+        }
+        DRJIT_MARK_USED(wl);
+        return out;
+    }
+
 private:
     /// The kind's program for the built parameters where there is one and
     /// the parameters are those (`params.at_built`), else the plain one
@@ -256,6 +296,8 @@ private:
     Prog m_eval, m_pdf, m_sample, m_coherent;
     /// Each kind's program for the built parameters, where the core has one
     Prog m_eval_at_built, m_pdf_at_built, m_sample_at_built, m_coherent_at_built;
+    /// Polarized variants: the polarisation's program (none: depolarize)
+    Prog m_polarization;
     program::TableStorage m_host_tables;
 };
 

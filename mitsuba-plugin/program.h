@@ -306,6 +306,16 @@ inline std::vector<float> export_program(const StamBrdf *b, uint32_t kind) {
     return v;
 }
 
+/// The core's polarisation program (stam_brdf_export_polarization_program),
+/// empty where the material has none
+inline std::vector<float> export_polarization_program(const StamBrdf *b) {
+    size_t n = stam_brdf_export_polarization_program(b, nullptr, 0);
+    std::vector<float> v(n);
+    if (n && stam_brdf_export_polarization_program(b, v.data(), n) != n)
+        throw Malformed("the core wrote a program of another length than it announced");
+    return v;
+}
+
 /// The core's mixture program (STAM_MIXTURE_*, with STAM_PROGRAM_AT_BUILT
 /// where wanted) over `n_wavelengths` as an array, empty where it has none
 inline std::vector<float> export_mixture_program(const StamBrdf *b, uint32_t kind,

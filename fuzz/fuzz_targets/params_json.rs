@@ -68,6 +68,7 @@ fuzz_target!(|data: &[u8]| {
             let q: f32 = v.iter().map(|x| x * x).sum();
             assert!(q.is_finite() && if has == 1 { (q - 1.0).abs() < 1e-4 } else { q == 0.0 });
         }
+        assert_eq!(stam_brdf_export_polarization_program(p, std::ptr::null_mut(), 0) > 0, has == 1);
         for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
             stam_brdf_sample(p, n, wi.as_ptr(), lam_ptr, rnd.as_ptr(), out.as_mut_ptr(), pdf.as_mut_ptr(), coh.as_mut_ptr());
             assert!(ok(&pdf));

@@ -212,6 +212,14 @@ size_t stam_brdf_export_program(const StamBrdf *b, uint32_t kind, float *out,
 size_t stam_brdf_export_mixture_program(const StamBrdf *b, uint32_t kind, uint32_t n_wavelengths,
                                         float *out, size_t capacity);
 
+/* The program of stam_brdf_polarization: wi[3] wo[3] lambda -> b, c, s, as
+ * that function gives them (the same generic source; a measured metal's index
+ * read linearly from its values at each whole nanometre of 360-830 nm). The
+ * JIT polarized variants run it. Returns 0 where stam_brdf_polarization
+ * returns 0 (rigorous gratings) or b is NULL; sized and written as
+ * stam_brdf_export_program. */
+size_t stam_brdf_export_polarization_program(const StamBrdf *b, float *out, size_t capacity);
+
 /* The numbers of inputs and outputs of program kind `kind` (STAM_PROGRAM_*,
  * n_wavelengths 0: the tables above) or of mixture kind `kind`
  * (STAM_MIXTURE_*) over n_wavelengths, written where the pointers are not

@@ -684,6 +684,19 @@ pub unsafe extern "C" fn stam_brdf_export_program(
 /// # Safety
 /// `b` NULL or valid; `out` NULL or valid for `capacity` floats.
 #[no_mangle]
+pub unsafe extern "C" fn stam_brdf_export_polarization_program(
+    b: *const StamBrdf,
+    out: *mut f32,
+    capacity: usize,
+) -> usize {
+    export(b, 0, out, capacity, |brdf, _, _| {
+        brdf.polarization_program()
+    })
+}
+
+/// # Safety
+/// `b` NULL or valid; `out` NULL or valid for `capacity` floats.
+#[no_mangle]
 pub unsafe extern "C" fn stam_brdf_export_mixture_program(
     b: *const StamBrdf,
     kind: u32,

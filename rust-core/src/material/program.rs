@@ -149,6 +149,26 @@ impl Brdf {
         self.program_with(kind, self.plain_builder(), true)
     }
 
+    /// The polarisation's program (`stam_brdf_export_polarization_program`):
+    /// wi (3), wo (3), lambda (nm) -> b, c, s of `Brdf::polarization`, the
+    /// Fresnel reflection's at the pair's half vector (normal incidence's
+    /// for a pair below the horizon). None where `polarization` is None
+    /// (rigorous gratings).
+    pub fn polarization_program(&self) -> Option<Program> {
+        if self.surface().is_unfactored() {
+            return None;
+        }
+        let b = self.plain_builder();
+        let wi = [b.input(), b.input(), b.input()];
+        let wo = [b.input(), b.input(), b.input()];
+        let lambda_nm = b.input();
+        let pair = PairProgram::new(&b, wi, wo);
+        let out = self
+            .fresnel()
+            .polarization_program(&b, pair.cos_half, lambda_nm);
+        Some(b.finish(&out))
+    }
+
     /// The builder of the plain programs: for any parameter value, smooth
     /// along the parameters the renderer differentiates.
     fn plain_builder(&self) -> Builder {

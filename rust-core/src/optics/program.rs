@@ -3,7 +3,7 @@
 //! lookups as `fresnel::Fresnel::reflectance`, for a renderer's traced
 //! kernels. Knows no surface model.
 
-use super::fresnel::{conductor_reflectance, Fresnel};
+use super::fresnel::{conductor_polarization, conductor_reflectance, metal_index, Fresnel};
 use super::geometry::MIN_COS;
 use crate::program::lookup::catmull_rom_weights;
 use crate::program::{Builder, Mask, ParamId, Value};
@@ -109,6 +109,51 @@ impl Fresnel {
                 conductor_reflectance(cos, eta, k)
             }
             Fresnel::Metal { .. } => self.grid_program(b, cos, lambda_nm),
+        }
+    }
+
+    /// The polarisation (b, c, s) at `cos` and `lambda_nm` as
+    /// `polarization` computes it (`conductor_polarization`, the same
+    /// generic source): a complex index from the material's parameters
+    /// (ParamId::Eta and ParamId::K); a measured metal's index, linear in
+    /// wavelength, from its values at every whole nanometre of the band
+    /// (the native path is linear between the measured wavelengths, which
+    /// differ inside the nanometres that hold one); a constant reflectance,
+    /// a perfect conductor's.
+    pub fn polarization_program<'a>(
+        &self,
+        b: &'a Builder,
+        cos: Value<'a>,
+        lambda_nm: Value<'a>,
+    ) -> [Value<'a>; 3] {
+        match self {
+            Fresnel::Constant(_) => [b.c(0.0), b.c(-1.0), b.c(0.0)],
+            Fresnel::ComplexIndex { eta, k } => {
+                let (eta, k) = (b.param(ParamId::Eta, *eta), b.param(ParamId::K, *k));
+                conductor_polarization(cos, eta, k)
+            }
+            Fresnel::Metal { table, .. } => {
+                let (lo, hi) = (
+                    crate::spectrum::LAMBDA_MIN_NM,
+                    crate::spectrum::LAMBDA_MAX_NM,
+                );
+                let n = (hi - lo).round() as usize + 1;
+                let (etas, ks): (Vec<f32>, Vec<f32>) = (0..n)
+                    .map(|i| {
+                        let (eta, k) = metal_index(table, lo + i as f64);
+                        (eta as f32, k as f32)
+                    })
+                    .unzip();
+                let (eta_table, k_table) = (b.table(etas), b.table(ks));
+                let x = lambda_nm.finite().select(lambda_nm, lo).clamp(lo, hi) - lo;
+                let i = x.floor().min((n - 2) as f64);
+                let t = x - i;
+                let linear = |table| {
+                    let (a, c) = (b.gather(table, i), b.gather(table, i + 1.0));
+                    a + (c - a) * t
+                };
+                conductor_polarization(cos, linear(eta_table), linear(k_table))
+            }
         }
     }
 

@@ -392,6 +392,33 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
                   "polarization lane %d: (%g, %g, %g), returned %d", i, pol[3 * i],
                   pol[3 * i + 1], pol[3 * i + 2], has);
         }
+        /* Its program exists where it does and gives its values (lanes 0
+         * and 1, in the band) within 1e-3 (a metal's index is read from
+         * whole nanometres in the program). */
+        const size_t np = stam_brdf_export_polarization_program(b, NULL, 0);
+        CHECK(77, (np > 0) == (has == 1) &&
+                      stam_brdf_export_polarization_program(NULL, NULL, 0) == 0,
+              "polarization program: %zu floats, polarization returned %d", np, has);
+        if (np > 0) {
+            float *prog = malloc(np * sizeof(float));
+            CHECK(77, prog != NULL, "out of memory");
+            stam_brdf_export_polarization_program(b, prog, np);
+            float x[7 * 2], o[3 * 2];
+            for (int i = 0; i < 2; ++i) {
+                for (int d = 0; d < 3; ++d) {
+                    x[7 * i + d] = wi[3 * i + d];
+                    x[7 * i + 3 + d] = wo[3 * i + d];
+                }
+                x[7 * i + 6] = lambda[i];
+            }
+            const int ran = stam_program_run(prog, np, x, 2, NULL, 0, o, NULL, NULL, NULL, err,
+                                             sizeof err);
+            free(prog);
+            CHECK(78, ran, "polarization program did not run: %s", err);
+            for (int i = 0; i < 6; ++i)
+                CHECK(78, fabsf(o[i] - pol[i]) <= 1e-3f, "polarization program %d: %g, not %g",
+                      i, o[i], pol[i]);
+        }
         CHECK(76, stam_brdf_polarization(NULL, N, wi, wo, lambda, pol) == 0 && pol[0] == 0.0f &&
                       stam_brdf_polarization(b, N, NULL, wo, lambda, pol) == 0,
               "polarization of a NULL material or direction");

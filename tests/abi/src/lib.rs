@@ -236,6 +236,10 @@ mod tests {
             ffi::stam_program_io as unsafe extern "C" fn(_, _, _, _) -> _,
         );
         same_signature(
+            h::stam_brdf_export_polarization_program as unsafe extern "C" fn(_, _, _) -> _,
+            ffi::stam_brdf_export_polarization_program as unsafe extern "C" fn(_, _, _) -> _,
+        );
+        same_signature(
             h::stam_brdf_polarization as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
             ffi::stam_brdf_polarization as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
         );

@@ -569,6 +569,38 @@ pub fn run(options: &Options) -> Report {
                 report.fail(format!("{w}: ABI {abi:?} ({has}), Rust {rust:?}"));
             }
         }
+        // Its program: where the material has a polarisation, the ABI's
+        // array is the Rust API's, and run in f32 on these hostile lanes
+        // it gives finite values on the unit sphere (b^2 + c^2 + s^2 = 1
+        // within 1e-3; its agreement with the native values at ordinary
+        // pairs is the core's test
+        // polarization_program_follows_the_native_polarization: near
+        // Brewster's angle of a dielectric, and near grazing, f32's
+        // half-vector cosine moves them by more).
+        let n_prog =
+            unsafe { ffi::stam_brdf_export_polarization_program(b, std::ptr::null_mut(), 0) };
+        let rust_prog = brdf.polarization_program();
+        let mut prog_ok = (n_prog > 0) == rust_prog.is_some();
+        if let (true, Some(p)) = (n_prog > 0, &rust_prog) {
+            let mut array = vec![0f32; n_prog];
+            unsafe { ffi::stam_brdf_export_polarization_program(b, array.as_mut_ptr(), n_prog) };
+            prog_ok &= array == p.encode();
+            for i in 0..n {
+                let mut input = [0f32; 7];
+                input[..3].copy_from_slice(&wi32[3 * i..3 * i + 3]);
+                input[3..6].copy_from_slice(&wo32[3 * i..3 * i + 3]);
+                input[6] = lam32[i];
+                let out: Vec<f32> = p.run(&input);
+                let q: f32 = out.iter().map(|x| x * x).sum();
+                prog_ok &= q.is_finite() && (q - 1.0).abs() <= 1e-3;
+            }
+        }
+        if !prog_ok {
+            report.bad_polarization += 1;
+            report.fail(format!(
+                "polarization program ({n_prog} floats) apart from the Rust API for {json}"
+            ));
+        }
         report.evaluations_abi += n as u64;
         report.evaluations_rust += n as u64;
 

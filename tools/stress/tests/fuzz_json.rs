@@ -187,6 +187,11 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
                 return Err(format!("polarization gave {v:?} (returned {has})"));
             }
         }
+        if (stam_brdf_export_polarization_program(p, std::ptr::null_mut(), 0) > 0) != (has == 1) {
+            return Err(format!(
+                "a polarization program where polarization returned {has}"
+            ));
+        }
         for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
             stam_brdf_sample(
                 p,
