@@ -171,6 +171,8 @@ check: lint plugin
 # accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
 bench-render: plugin
 	$(PYTHON) scripts/bench_render.py --repeats 7 --processes 3 --write docs/plugin_speed.md
+	$(PYTHON) scripts/bench_render.py --repeats 5 --processes 3 \
+		--variants scalar_spectral_polarized,llvm_ad_spectral_polarized
 	$(PYTHON) scripts/bench_scenes.py --processes 3 --repeats 3
 
 bench:
