@@ -673,13 +673,8 @@ mod tests {
     /// `conductor_reflectance`.
     #[test]
     fn polarization_matches_complex_amplitudes() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::sampling::SplitMix64(0x2545_f491_4f6c_dd1d);
+        let mut uniform = || rng.next_f64();
         let mut worst = 0.0f64;
         for i in 0..20_000 {
             let c = if i % 100 == 0 { 0.0 } else { uniform() };
