@@ -263,8 +263,8 @@ result is a Mueller matrix: the unpolarized value times the Fresnel
 reflection's polarization at the pair's half vector (from the core: natively
 in scalar variants, its program in JIT ones), in Mitsuba's Stokes bases, as
 roughconductor's (docs/polarisation.md); rigorous gratings still depolarize
-(the unpolarized value times a depolarizer). RGB variants receive the core's D65-weighted linear
-sRGB integral; colours purer than the sRGB primaries (the nearly
+(the unpolarized value times a depolarizer). RGB variants receive the core's
+D65-weighted linear sRGB integral; colours purer than the sRGB primaries (the nearly
 monochromatic orders of gratings) are desaturated into the gamut at
 constant luminance, so RGB renders of gratings are paler than spectral ones.
 
@@ -619,12 +619,12 @@ private:
     /// The value (f cos, or a sample's weight) of the reflection from
     /// si.wi to wo (local frame) as the variant's Spectrum. Polarized
     /// variants: a Mueller matrix, the value times the core's polarisation
-    /// of the reflection (stam_brdf_polarization: the Fresnel reflection's
-    /// at the half vector, in the conventions of Mitsuba's
-    /// mueller::specular_reflection), its Stokes bases rotated into the
-    /// implicit ones of the directions the light travels along, as
-    /// Mitsuba's roughconductor does. The JIT polarized variants, and
-    /// materials without a polarisation (rigorous gratings), depolarize.
+    /// of the reflection (the Fresnel reflection's at the half vector, in
+    /// the conventions of Mitsuba's mueller::specular_reflection; scalar
+    /// variants: stam_brdf_polarization, JIT ones: its program), its Stokes
+    /// bases rotated into the implicit ones of the directions the light
+    /// travels along, as Mitsuba's roughconductor does. Materials without a
+    /// polarisation (rigorous gratings) depolarize.
     Spectrum as_spectrum(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                          const Vector3f &wo, const UnpolarizedSpectrum &value) const {
         if constexpr (!is_polarized_v<Spectrum>) {
