@@ -639,10 +639,8 @@ private:
             if constexpr (dr::is_jit_v<Float>) {
                 if (!m_jit.has_polarization())
                     return depolarizer<Spectrum>(value);
-                typename Jit::Params params{ m_param_array.array(), {} };
-                m_textures.apply(params, si, Mask(true));
-                params.at_built = m_param_array.at_built() && !params.any_per_point();
-                pol = m_jit.polarization(si.wi, wo, si.wavelengths, m_tables, params);
+                pol = m_jit.polarization(si.wi, wo, si.wavelengths, m_tables,
+                                         jit_params(si, Mask(true)));
             } else {
                 constexpr size_t NW = dr::size_v<UnpolarizedSpectrum>;
                 if (!m_core || !(dr::squared_norm(sum) > 0.f))
@@ -1123,6 +1121,17 @@ private:
         }
     }
 
+    /// JIT variants: the values the programs read of the material's
+    /// parameters (memory, textures at si's points where active)
+    typename Jit::Params jit_params(const SurfaceInteraction3f &si, const Mask &active) const {
+        typename Jit::Params params{ m_param_array.array(), {} };
+        m_textures.apply(params, si, active);
+        // The built values, from memory, without a gradient or a texture:
+        // the core's programs for that case may run (jit_path.h)
+        params.at_built = m_param_array.at_built() && !params.any_per_point();
+        return params;
+    }
+
     /// JIT variants: the core's programs as Dr.Jit operations, which Dr.Jit
     /// traces in every mode (symbolic loops and calls, dr.freeze, wavefront),
     /// on LLVM and CUDA, with no host round trip.
@@ -1130,11 +1139,7 @@ private:
                    const Float *sample1, const Point2f *sample2, bool want_value,
                    bool want_pdf, Query &q) const {
         const Wavelength &wl = si.wavelengths;
-        typename Jit::Params params{ m_param_array.array(), {} };
-        m_textures.apply(params, si, st.active_e || st.active_s);
-        // The built values, from memory, without a gradient or a texture:
-        // the core's programs for that case may run (jit_path.h)
-        params.at_built = m_param_array.at_built() && !params.any_per_point();
+        typename Jit::Params params = jit_params(si, st.active_e || st.active_s);
         if (st.do_eval) {
             if (want_value)
                 q.value = dr::select(st.active_e,

@@ -129,8 +129,8 @@ struct Code {
     size_t gathers = 0;
     /// Where each table starts in the buffer the caller loads (Program).
     std::vector<uint32_t> table_base;
-    /// Where the program's entries of that buffer's table directory start
-    /// (TableStorage: two per table, its start and last index)
+    /// Where the program's tables start in that buffer's table directory
+    /// (TableStorage: one entry per table, its start and last index)
     uint32_t dir_offset = 0;
 };
 
@@ -358,24 +358,24 @@ public:
     /// The directory entries of one program's tables (their starts from
     /// `add` and lengths): returns where they start in the directory.
     uint32_t add_directory(const std::vector<uint32_t> &base, const std::vector<size_t> &len) {
-        uint32_t at = (uint32_t) m_dir.size();
+        uint32_t at = (uint32_t) m_starts.size();
         for (size_t t = 0; t < base.size(); ++t) {
-            m_dir.push_back(base[t]);
-            m_dir.push_back((uint32_t) (len[t] ? len[t] - 1 : 0));
+            m_starts.push_back(base[t]);
+            m_lasts.push_back((uint32_t) (len[t] ? len[t] - 1 : 0));
         }
         return at;
     }
 
     /// The tables' values, one after the other.
     const std::vector<float> &values() const { return m_values; }
-    /// Per table of each program (`add_directory`): its start in
-    /// `values()`, then its last index.
-    const std::vector<uint32_t> &directory() const { return m_dir; }
-    bool empty() const { return m_values.empty() && m_dir.empty(); }
+    /// Per directory entry (a table of a program, `add_directory`): its
+    /// start in `values()`, and its last index.
+    const std::vector<uint32_t> &starts() const { return m_starts; }
+    const std::vector<uint32_t> &lasts() const { return m_lasts; }
 
 private:
     std::vector<float> m_values;
-    std::vector<uint32_t> m_dir;
+    std::vector<uint32_t> m_starts, m_lasts;
     std::unordered_multimap<uint64_t, std::pair<uint32_t, size_t>> m_index;
 };
 
@@ -404,11 +404,10 @@ template <typename Buffer> struct Tables {
         Tables out;
         const std::vector<float> &v = storage.values();
         out.values = v.empty() ? dr::zeros<Buffer>(1) : dr::load<Buffer>(v.data(), v.size());
-        const std::vector<uint32_t> &dir = storage.directory();
-        for (size_t k = 0; k + 1 < dir.size(); k += 2) {
-            out.start.push_back(dr::opaque<UInt32D>(dir[k]));
-            out.last.push_back(dr::opaque<FloatD>((float) dir[k + 1]));
-        }
+        for (uint32_t start : storage.starts())
+            out.start.push_back(dr::opaque<UInt32D>(start));
+        for (uint32_t last : storage.lasts())
+            out.last.push_back(dr::opaque<FloatD>((float) last));
         return out;
     }
 
@@ -676,7 +675,7 @@ private:
             return Float(0.f);
         using FloatD = dr::detached_t<Float>;
         using UInt32D = dr::uint32_array_t<FloatD>;
-        size_t entry = code.dir_offset / 2 + t;
+        size_t entry = code.dir_offset + t;
         FloatD xd = dr::detach<false>(x);
         FloatD xi = dr::clip(dr::select(dr::isnan(xd), 0.f, xd), 0.f, tables.last[entry]);
         UInt32 idx = UInt32(UInt32D(xi) + tables.start[entry]);
