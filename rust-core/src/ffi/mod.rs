@@ -297,7 +297,7 @@ pub unsafe extern "C" fn stam_brdf_polarization(
         batch(b, n, out, 3, false, |_, _, _| {});
         return 0;
     }
-    if n > 0 && (*b).brdf.polarization(DVec3::Z, DVec3::Z, 550.0).is_none() {
+    if !(*b).brdf.polarizes() {
         batch(b, n, out, 3, false, |_, _, _| {});
         return 0;
     }

@@ -245,6 +245,13 @@ impl Brdf {
         self.fresnel.at_cos(geom.cos_half)
     }
 
+    /// Whether the material has a polarisation (`polarization`): every
+    /// surface whose f is F^2 G K, not one whose f is its own (rigorous
+    /// gratings).
+    pub fn polarizes(&self) -> bool {
+        !self.surface.is_unfactored()
+    }
+
     /// The polarisation of the reflection from wi to wo at lambda: the
     /// Fresnel reflection's at the pair's half vector
     /// (`Fresnel::polarization`), (b, c, s) of its Mueller matrix over the
@@ -253,7 +260,7 @@ impl Brdf {
     /// is not exported yet). A pair without a geometry (a direction below
     /// the horizon, where f is 0) takes normal incidence's.
     pub fn polarization(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> Option<[f64; 3]> {
-        if self.surface.is_unfactored() {
+        if !self.polarizes() {
             return None;
         }
         let cos_half = PairGeometry::new(wi, wo).map_or(1.0, |g| g.cos_half);

@@ -155,7 +155,7 @@ impl Brdf {
     /// for a pair below the horizon). None where `polarization` is None
     /// (rigorous gratings).
     pub fn polarization_program(&self) -> Option<Program> {
-        if self.surface().is_unfactored() {
+        if !self.polarizes() {
             return None;
         }
         let b = self.plain_builder();

@@ -573,18 +573,15 @@ where
     let (e_r, e_i) = (ds_r * dp_r + ds_i * dp_i, ds_r * dp_i - ds_i * dp_r);
     let (x_r, x_i) = (a_r * e_r - a_i * e_i, a_r * e_i + a_i * e_r);
     let d = rs2 + rp2;
-    let ok = d.finite() & d.gt(0.0);
-    let inv = T::select(
-        ok,
-        d.constant(1.0) / T::select(ok, d, d.constant(1.0)),
-        d.constant(0.0),
-    );
+    // Where D is 0 or not finite, the division reads 1 instead; the
+    // fallback below replaces what it gives.
+    let d_ok = d.finite() & d.gt(0.0);
+    let inv = d.constant(1.0) / T::select(d_ok, d, d.constant(1.0));
     let b = (rs2 - rp2) * inv;
     let cc = x_r * inv * 2.0;
     let ss = x_i * inv * -2.0;
     let zero = b.constant(0.0);
-    let fin = b.finite() & cc.finite() & ss.finite();
-    let ok = ok & fin;
+    let ok = d_ok & b.finite() & cc.finite() & ss.finite();
     [
         T::select(ok, b, zero),
         T::select(ok, cc, zero.constant(-1.0)),
