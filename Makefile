@@ -17,6 +17,7 @@
 #                 (scripts/render_guide.py, about a minute on two cores)
 #   make wheel    the pip-installable package stam-diffraction: dist/*.whl
 #                 (pyproject.toml; its CMakeLists.txt runs `make plugin`)
+#   make fuzz     the JSON/ABI fuzzing at depth (30,000 cases per strategy)
 #   make check    the contributors' inner loop (lint, the fast Rust and Python
 #                 tests; at most 3 minutes warm); `make test` runs everything
 # Variables: PYTHON (the venv's python), STAM_LIB (static core library to link;
@@ -63,7 +64,7 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo animation compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress furnace FORCE
+.PHONY: all demo animation compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress fuzz furnace FORCE
 all: plugin
 
 demo: setup plugin
@@ -94,8 +95,11 @@ core:
 	$(CARGO) build --release -p stam-core
 
 # The default core library is (re)built by cargo, which knows its sources.
+# The plugin's object needs only stam.h: it compiles (a minute on one core)
+# while cargo builds the core.
 ifeq ($(STAM_LIB),$(STAM_LIB_DEFAULT))
-plugin: core
+plugin:
+	@$(MAKE) --no-print-directory -j2 core $(PLUGIN_OBJ)
 	@$(MAKE) --no-print-directory $(PLUGIN_SO)
 else
 plugin: $(PLUGIN_SO)
@@ -193,3 +197,8 @@ furnace: setup
 # The full numerical stress run (10^7 evaluations; CI runs 10^5 in test-rust).
 stress:
 	$(CARGO) run --release -p stress --bin stress -- --count 10000000 --write docs/stress.md
+
+# The JSON/ABI fuzzing at depth: 30,000 cases per strategy (`make test` runs
+# 3,000, and 1,000 mutated valid materials; tools/stress/tests/fuzz_json.rs).
+fuzz:
+	FUZZ_CASES=30000 $(CARGO) test --release -p stress --test fuzz_json -- --nocapture
