@@ -292,16 +292,14 @@ pub unsafe extern "C" fn stam_brdf_polarization(
     lambda_nm: *const f32,
     out: *mut f32,
 ) -> i32 {
-    let ok = !wi.is_null() && !wo.is_null() && !lambda_nm.is_null();
-    if b.is_null() || out.is_null() || !ok {
-        batch(b, n, out, 3, false, |_, _, _| {});
-        return 0;
-    }
-    if !(*b).brdf.polarizes() {
-        batch(b, n, out, 3, false, |_, _, _| {});
-        return 0;
-    }
-    batch(b, n, out, 3, true, |brdf, i, o| {
+    // A material without a polarisation, or an input missing: zeros, and 0
+    let polarizes = !wi.is_null()
+        && !wo.is_null()
+        && !lambda_nm.is_null()
+        && !out.is_null()
+        && !b.is_null()
+        && (*b).brdf.polarizes();
+    batch(b, n, out, 3, polarizes, |brdf, i, o| {
         let lambda = *lambda_nm.add(i) as f64;
         let p = brdf
             .polarization(direction(wi, i), direction(wo, i), lambda)
@@ -310,7 +308,7 @@ pub unsafe extern "C" fn stam_brdf_polarization(
             *o = v as f32;
         }
     });
-    1
+    polarizes as i32
 }
 
 #[inline]
