@@ -5,7 +5,7 @@
 
 use super::fresnel::{conductor_polarization, conductor_reflectance, metal_index, Fresnel};
 use super::geometry::MIN_COS;
-use crate::program::lookup::catmull_rom_weights;
+use crate::program::lookup::{self, catmull_rom_weights};
 use crate::program::{Builder, Mask, ParamId, Value};
 
 /// A direction as three registers.
@@ -144,15 +144,10 @@ impl Fresnel {
                         (eta as f32, k as f32)
                     })
                     .unzip();
-                let (eta_table, k_table) = (b.table(etas), b.table(ks));
-                let x = lambda_nm.finite().select(lambda_nm, lo).clamp(lo, hi) - lo;
-                let i = x.floor().min((n - 2) as f64);
-                let t = x - i;
-                let linear = |table| {
-                    let (a, c) = (b.gather(table, i), b.gather(table, i + 1.0));
-                    a + (c - a) * t
-                };
-                conductor_polarization(cos, linear(eta_table), linear(k_table))
+                let lambda = lambda_nm.finite().select(lambda_nm, lo);
+                let tables = [(b.table(etas), 0), (b.table(ks), 0)];
+                let [eta, k] = lookup::uniform_linear(b, tables, n, lo, 1.0, lambda);
+                conductor_polarization(cos, eta, k)
             }
         }
     }

@@ -38,27 +38,29 @@ pub fn sum<'a>(b: &'a Builder, values: impl IntoIterator<Item = Value<'a>>) -> V
         .unwrap_or_else(|| b.c(0.0))
 }
 
-/// Linear interpolation in `table[offset .. offset + n]`, whose entry j is
-/// at x0 + j dx; x clamped to the table's range.
-pub fn uniform_linear<'a>(
+/// Linear interpolation at x in tables of n entries each, entry j at
+/// x0 + j dx (`tables`: a table and the offset its entries start at), x
+/// clamped to their range: the position is worked out once for them all.
+pub fn uniform_linear<'a, const K: usize>(
     b: &'a Builder,
-    table: Table,
-    offset: usize,
+    tables: [(Table, usize); K],
     n: usize,
     x0: f64,
     dx: f64,
     x: Value<'a>,
-) -> Value<'a> {
+) -> [Value<'a>; K] {
     if n == 1 {
-        return b.gather(table, b.c(offset as f64));
+        return tables.map(|(table, offset)| b.gather(table, b.c(offset as f64)));
     }
     let f = ((x - x0) * (1.0 / dx)).clamp(0.0, (n - 1) as f64);
     let i = f.floor().min((n - 2) as f64);
     let t = f - i;
-    let at = i + offset as f64;
-    let lo = b.gather(table, at);
-    let hi = b.gather(table, at + 1.0);
-    lo + (hi - lo) * t
+    tables.map(|(table, offset)| {
+        let at = i + offset as f64;
+        let lo = b.gather(table, at);
+        let hi = b.gather(table, at + 1.0);
+        lo + (hi - lo) * t
+    })
 }
 
 /// `values[i]` for an integer-valued `i` in [0, values.len()) by a chain of
