@@ -296,35 +296,36 @@ inline Code decode_program(const float *v, size_t len) {
     return p;
 }
 
+/// The array an export function of the core writes (`write(out, capacity)`,
+/// its length returned), sized with out = nullptr; empty where it has none.
+template <typename Write> std::vector<float> exported(Write write) {
+    size_t n = write(nullptr, 0);
+    std::vector<float> v(n);
+    if (n && write(v.data(), n) != n)
+        throw Malformed("the core wrote a program of another length than it announced");
+    return v;
+}
+
 /// The program of `kind` exported by the core material b; an empty vector
 /// where the material has none.
 inline std::vector<float> export_program(const StamBrdf *b, uint32_t kind) {
-    size_t n = stam_brdf_export_program(b, kind, nullptr, 0);
-    std::vector<float> v(n);
-    if (n && stam_brdf_export_program(b, kind, v.data(), n) != n)
-        throw Malformed("the core wrote a program of another length than it announced");
-    return v;
+    return exported([&](float *out, size_t n) { return stam_brdf_export_program(b, kind, out, n); });
 }
 
 /// The core's polarisation program (stam_brdf_export_polarization_program),
 /// empty where the material has none
 inline std::vector<float> export_polarization_program(const StamBrdf *b) {
-    size_t n = stam_brdf_export_polarization_program(b, nullptr, 0);
-    std::vector<float> v(n);
-    if (n && stam_brdf_export_polarization_program(b, v.data(), n) != n)
-        throw Malformed("the core wrote a program of another length than it announced");
-    return v;
+    return exported(
+        [&](float *out, size_t n) { return stam_brdf_export_polarization_program(b, out, n); });
 }
 
 /// The core's mixture program (STAM_MIXTURE_*, with STAM_PROGRAM_AT_BUILT
 /// where wanted) over `n_wavelengths` as an array, empty where it has none
 inline std::vector<float> export_mixture_program(const StamBrdf *b, uint32_t kind,
                                                  uint32_t n_wavelengths) {
-    size_t n = stam_brdf_export_mixture_program(b, kind, n_wavelengths, nullptr, 0);
-    std::vector<float> v(n);
-    if (n && stam_brdf_export_mixture_program(b, kind, n_wavelengths, v.data(), n) != n)
-        throw Malformed("the core wrote a program of another length than it announced");
-    return v;
+    return exported([&](float *out, size_t n) {
+        return stam_brdf_export_mixture_program(b, kind, n_wavelengths, out, n);
+    });
 }
 
 /// The host values of the tables of several programs, each distinct table
