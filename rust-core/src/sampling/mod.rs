@@ -6,6 +6,7 @@
 //! (`rng`). The models' lobes live with their models (`models::*::sampling`).
 //! See docs/sampling.md.
 
+mod alias;
 mod band;
 mod mixture;
 pub mod program;
@@ -13,6 +14,7 @@ mod rng;
 mod table;
 pub mod warps;
 
+pub use alias::{draw_alias, AliasTable};
 pub use band::{band_density, rgb_sampling_nodes, RGB_BAND_NM, RGB_SAMPLING_NODES};
 pub use mixture::{Component, Components, Lobe, Mixture, SampleResult, DEFENSIVE_FRACTION};
 pub use rng::SplitMix64;

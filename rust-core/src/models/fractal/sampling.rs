@@ -6,7 +6,7 @@
 
 use super::{Fractal, LN_4PI2};
 use crate::sampling::warps::uv_to_direction;
-use crate::sampling::{Component, DEFENSIVE_FRACTION};
+use crate::sampling::{AliasTable, Component, DEFENSIVE_FRACTION};
 use crate::special::fast_exp;
 use crate::spectrum::wavenumber_per_um;
 use glam::DVec3;
@@ -157,34 +157,10 @@ impl RadialProposal {
         let mut mass: Vec<f64> = rho.windows(2).map(|w| 0.5 * h * (w[0] + w[1])).collect();
         mass.push(0.5 * rho[0]);
         mass.push(rho[cells] / alpha);
-        let total: f64 = mass.iter().sum();
-        let entries = mass.len();
-        // Vose's alias method on the masses scaled to a mean of 1.
-        let mut scaled: Vec<f64> = mass.iter().map(|m| m / total * entries as f64).collect();
-        let mut keep = vec![1.0; entries];
-        let mut alias: Vec<usize> = (0..entries).collect();
-        let (mut small, mut large): (Vec<usize>, Vec<usize>) =
-            (0..entries).partition(|&i| scaled[i] < 1.0);
-        while let (Some(s), Some(&l)) = (small.pop(), large.last()) {
-            keep[s] = scaled[s];
-            alias[s] = l;
-            scaled[l] -= 1.0 - scaled[s];
-            if scaled[l] < 1.0 {
-                large.pop();
-                small.push(l);
-            }
-        }
-        let alias_table: Vec<f32> = (0..entries)
-            .flat_map(|e| [keep[e] as f32, alias[e] as f32])
-            .collect();
         // The law as stored: entry e keeps itself with probability keep
         // (f32) and passes the rest to its alias.
-        let mut p = vec![0.0; entries];
-        for e in 0..entries {
-            let k = alias_table[2 * e] as f64;
-            p[e] += k / entries as f64;
-            p[alias[e]] += (1.0 - k) / entries as f64;
-        }
+        let table = AliasTable::new(&mass);
+        let p = &table.probability;
         let density = (0..cells)
             .flat_map(|i| {
                 let scale = if mass[i] > 0.0 { p[i] / mass[i] } else { 0.0 };
@@ -199,7 +175,7 @@ impl RadialProposal {
             y_lo,
             h,
             cells,
-            alias: alias_table,
+            alias: table.interleaved.clone(),
             density,
             ln_below: (2.0 * p[cells]).ln(),
             ln_above: (alpha * p[cells + 1]).ln(),
