@@ -103,3 +103,93 @@ pub const SAMPLING_MATERIALS: [(&str, &str); 7] = [
         r#"{"surface":"fractal","hurst":0.35,"sigma_um":0.2,"lag_um":1,"fresnel":0.9}"#,
     ),
 ];
+
+/// A standard normal deviate (Box-Muller).
+fn normal(rng: &mut SplitMix64) -> f64 {
+    let [a, b, _] = rng.three();
+    (-2.0 * (1.0 - a).ln()).sqrt() * (2.0 * PI * b).cos()
+}
+
+/// An n x n height map (um, rows along y) of stationary Gaussian heights
+/// with the radial power spectrum `psd(|q|)` (q in rad/um: the 2-D Fourier
+/// transform of the correlation function), by filtering white noise on
+/// the torus; rescaled to rms `sigma` when given. The height-map model's
+/// tests and benchmarks draw their maps from it.
+pub fn synthetic_height_map(
+    n: usize,
+    pixel_um: f64,
+    seed: u64,
+    psd: impl Fn(f64) -> f64,
+    sigma: Option<f64>,
+) -> Vec<f64> {
+    use num_complex::Complex;
+    let mut rng = SplitMix64(seed);
+    let mut data: Vec<Complex<f64>> = (0..n * n)
+        .map(|_| Complex::new(normal(&mut rng), 0.0))
+        .collect();
+    let mut planner = rustfft::FftPlanner::<f64>::new();
+    let (fft, ifft) = (planner.plan_fft_forward(n), planner.plan_fft_inverse(n));
+    fft2(&mut data, n, |d| fft.process(d));
+    let side = n as f64 * pixel_um;
+    let freq = |i: usize| if i < n / 2 { i as f64 } else { i as f64 - n as f64 } / side;
+    for j in 0..n {
+        for i in 0..n {
+            let q = 2.0 * PI * (freq(i).powi(2) + freq(j).powi(2)).sqrt();
+            // White noise of unit variance per sample has the spectral
+            // density pixel^2; the filter makes it psd.
+            data[j * n + i] *= (psd(q) / (pixel_um * pixel_um)).sqrt();
+        }
+    }
+    fft2(&mut data, n, |d| ifft.process(d));
+    let mut h: Vec<f64> = data.iter().map(|z| z.re / (n * n) as f64).collect();
+    let mean = h.iter().sum::<f64>() / h.len() as f64;
+    h.iter_mut().for_each(|x| *x -= mean);
+    if let Some(sigma) = sigma {
+        let rms = (h.iter().map(|x| x * x).sum::<f64>() / h.len() as f64).sqrt();
+        h.iter_mut().for_each(|x| *x *= sigma / rms);
+    }
+    h
+}
+
+/// The 2-D FFT of an n x n array, rows then columns.
+fn fft2(
+    data: &mut [num_complex::Complex<f64>],
+    n: usize,
+    fft: impl Fn(&mut [num_complex::Complex<f64>]),
+) {
+    fft(data);
+    let mut t = data.to_vec();
+    for j in 0..n {
+        for i in 0..n {
+            t[i * n + j] = data[j * n + i];
+        }
+    }
+    fft(&mut t);
+    for j in 0..n {
+        for i in 0..n {
+            data[i * n + j] = t[j * n + i];
+        }
+    }
+}
+
+/// The spectrum of the Gaussian correlation sigma^2 exp(-r^2 / T^2).
+pub fn gaussian_psd(sigma_um: f64, t_um: f64) -> impl Fn(f64) -> f64 {
+    move |q| PI * t_um * t_um * sigma_um * sigma_um * (-q * q * t_um * t_um / 4.0).exp()
+}
+
+/// An ny x nx map (rows along y) as a little-endian f8 .npy file's bytes.
+pub fn npy_bytes(nx: usize, ny: usize, values: &[f64]) -> Vec<u8> {
+    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({ny}, {nx}), }}");
+    // The data starts at a multiple of 64 bytes, the header ends with '\n'.
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    for v in values {
+        bytes.extend(v.to_le_bytes());
+    }
+    bytes
+}

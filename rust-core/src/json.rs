@@ -297,6 +297,21 @@ impl<'a> Reader<'a> {
         })
     }
 
+    /// A string, refused by name when it is another type or empty.
+    pub fn string(&self, key: &str) -> Result<Option<String>, StamError> {
+        match self.obj.get(key) {
+            None => Ok(None),
+            Some(Value::String(s)) if !s.is_empty() => Ok(Some(s.clone())),
+            Some(Value::String(_)) => Err(StamError::new(format!(
+                "parameter '{key}' must not be empty"
+            ))),
+            Some(other) => Err(StamError::new(format!(
+                "parameter '{key}' must be a string, got {}",
+                type_name(other)
+            ))),
+        }
+    }
+
     /// An integer in [lo, hi].
     pub fn integer(&self, key: &str, (lo, hi): (usize, usize)) -> Result<Option<usize>, StamError> {
         match self.number(key)? {

@@ -596,6 +596,10 @@ mod tests {
                 json!({"surface": "cd", "profile": "sine", "height_um": 1e-12})
             }
             ("cd", "width_um") => json!({"surface": "cd", "period_um": 1000}),
+            // The parameters alone: the map is read when the surface is made.
+            ("heightmap", _) => {
+                json!({"surface": "heightmap", "file": "map.npy", "pixel_um": 0.08})
+            }
             _ => json!({"surface": surface}),
         };
         let Value::Object(m) = v else { unreachable!() };
@@ -630,7 +634,10 @@ mod tests {
             .iter()
             .map(|s| s["surface"].as_str().unwrap())
             .collect();
-        assert_eq!(names, ["gaussian", "fractal", "periodic", "cd"]);
+        assert_eq!(
+            names,
+            ["gaussian", "fractal", "periodic", "cd", "heightmap"]
+        );
         let mut checked_bounds = 0;
         for s in surfaces {
             let surface = s["surface"].as_str().unwrap();

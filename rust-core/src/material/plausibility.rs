@@ -78,6 +78,7 @@ pub fn warnings(params: &MaterialParams) -> Vec<Warning> {
         SurfaceParams::Gaussian(p) => gaussian(p, &mut out),
         SurfaceParams::Fractal(p) => fractal(p, &mut out),
         SurfaceParams::Periodic(p) => periodic(p, &mut out),
+        SurfaceParams::HeightMap(p) => heightmap(p, &mut out),
     }
     out
 }
@@ -88,6 +89,24 @@ pub fn warnings_for_json(text: &str) -> Vec<Warning> {
     MaterialParams::from_json(text)
         .map(|p| warnings(&p))
         .unwrap_or_default()
+}
+
+/// A map's spectrum ends at its Nyquist frequency 1 / (2 pixel), that is
+/// at |(u, v)| = lambda / (2 pixel): below lambda = 4 pixel, light
+/// scattered further than that from the mirror is missing.
+fn heightmap(p: &crate::models::heightmap::HeightMapParams, out: &mut Vec<Warning>) {
+    let cut_nm = 4000.0 * p.pixel_um;
+    if cut_nm > crate::spectrum::LAMBDA_MIN_NM {
+        warn(
+            out,
+            "pixel_um",
+            format!(
+                "parameter 'pixel_um' = {} um is coarser than a quarter of the shortest wavelength: the map's spectrum ends at |(u, v)| = lambda / (2 pixel_um), below 2 for wavelengths under {} nm, so the light such a map scatters far from the mirror direction is missing there (a map sampled at 0.09 um or finer has all of it).",
+                show(p.pixel_um),
+                show(cut_nm.min(9999.0))
+            ),
+        );
+    }
 }
 
 fn gaussian(p: &GaussianParams, out: &mut Vec<Warning>) {

@@ -182,6 +182,7 @@ fn uncached(brdf: &Brdf, wi: DVec3, lambda_nm: Option<f64>) -> Strategy<'_> {
         Strategy::Gaussian(m) => Strategy::Gaussian(m.into_local()),
         Strategy::Fractal(m) => Strategy::Fractal(m.into_local()),
         Strategy::Periodic(m) => Strategy::Periodic(m.into_local()),
+        Strategy::HeightMap(m) => Strategy::HeightMap(m.into_local()),
     }
 }
 

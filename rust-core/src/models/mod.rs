@@ -11,6 +11,7 @@
 
 pub mod fractal;
 pub mod gaussian;
+pub mod heightmap;
 pub mod periodic;
 pub mod program;
 mod rgb_rule;
@@ -367,6 +368,7 @@ surface_models! {
     Gaussian => gaussian::Gaussian,
     Fractal => fractal::Fractal,
     Periodic => periodic::Periodic,
+    HeightMap => heightmap::HeightMap,
 }
 
 impl Surface {
@@ -533,6 +535,7 @@ impl SurfaceParams {
             SurfaceParams::Gaussian(p) => SurfaceParams::Gaussian(p.with_param(id, value)),
             SurfaceParams::Fractal(p) => SurfaceParams::Fractal(p.with_param(id, value)),
             SurfaceParams::Periodic(p) => SurfaceParams::Periodic(p.with_param(id, value)),
+            SurfaceParams::HeightMap(p) => SurfaceParams::HeightMap(p.with_param(id, value)),
         }
     }
 }

@@ -27,6 +27,7 @@ pub trait Real:
     /// The constant `x` in the computation `self` belongs to.
     fn constant(self, x: f64) -> Self;
     fn sqrt(self) -> Self;
+    fn ln(self) -> Self;
     fn max(self, other: f64) -> Self;
     fn min(self, other: f64) -> Self;
     fn clamp(self, lo: f64, hi: f64) -> Self;
@@ -54,6 +55,9 @@ impl Real for f64 {
     }
     fn sqrt(self) -> f64 {
         f64::sqrt(self)
+    }
+    fn ln(self) -> f64 {
+        f64::ln(self)
     }
     fn max(self, other: f64) -> f64 {
         f64::max(self, other)
@@ -104,6 +108,9 @@ impl<'a> Real for Value<'a> {
     }
     fn sqrt(self) -> Value<'a> {
         Value::sqrt(self)
+    }
+    fn ln(self) -> Value<'a> {
+        Value::ln(self)
     }
     fn max(self, other: f64) -> Value<'a> {
         Value::max(self, other)

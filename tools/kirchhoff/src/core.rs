@@ -82,6 +82,9 @@ impl Core {
                 p.coherence_um,
                 p.profile,
             )?),
+            SurfaceParams::HeightMap(_) => {
+                return Err("a height map is read by Brdf::from_json only".into())
+            }
         })
     }
 

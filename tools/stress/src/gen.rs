@@ -55,8 +55,9 @@ impl Rng {
 /// of the accepted range, near 0 and 1).
 pub const HURST_SET: [f64; 10] = [1e-3, 0.01, 0.1, 0.25, 0.5, 0.7, 0.85, 0.97, 0.999, 1.0];
 
-/// Surface kinds a material generator can produce.
-pub const SURFACES: [&str; 7] = [
+/// Surface kinds a material generator can produce (height maps last, so
+/// that kinds 0..7 keep their surfaces).
+pub const SURFACES: [&str; 8] = [
     "gaussian",
     "anisotropic",
     "fractal",
@@ -64,7 +65,58 @@ pub const SURFACES: [&str; 7] = [
     "sine",
     "tabulated",
     "cd",
+    "heightmap",
 ];
+
+/// The hostile height maps the generator's height-map materials read,
+/// written once per process as .npy files: flat (a mirror), a single
+/// spike, heights of hundreds of micrometres, white noise, a sine with
+/// a cusp, a 16 x 256 strip; heights in um.
+pub fn height_maps() -> &'static [String] {
+    static MAPS: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+    MAPS.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("stam-stress-maps-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("a folder for the stress maps");
+        let mut rng = Rng::new(99);
+        let mut maps: Vec<(&str, usize, usize, Vec<f64>)> = vec![
+            ("flat", 16, 16, vec![0.0; 256]),
+            (
+                "spike",
+                32,
+                32,
+                (0..1024)
+                    .map(|i| if i == 300 { 5.0 } else { 0.0 })
+                    .collect(),
+            ),
+            (
+                "huge",
+                64,
+                64,
+                (0..4096).map(|_| rng.range(-300.0, 300.0)).collect(),
+            ),
+            (
+                "noise",
+                64,
+                64,
+                (0..4096).map(|_| rng.range(-0.05, 0.05)).collect(),
+            ),
+        ];
+        let cusp = (0..64 * 64)
+            .map(|i| ((i % 64) as f64 * 0.3).sin().abs() * 0.2)
+            .collect();
+        maps.push(("cusp", 64, 64, cusp));
+        let strip = (0..16 * 256).map(|_| rng.range(0.0, 0.02)).collect();
+        maps.push(("strip", 256, 16, strip));
+        maps.into_iter()
+            .map(|(name, nx, ny, h)| {
+                let path = dir.join(format!("{name}.npy"));
+                std::fs::write(&path, stam::benchmark::npy_bytes(nx, ny, &h))
+                    .expect("a stress map");
+                path.to_string_lossy().into_owned()
+            })
+            .collect()
+    })
+}
 
 fn fresnel(rng: &mut Rng) -> Option<String> {
     Some(match rng.below(9) {
@@ -167,6 +219,19 @@ pub fn material(rng: &mut Rng, kind: usize) -> String {
                 }
             }
         }
+        "heightmap" => {
+            let maps = height_maps();
+            let file = serde_json::Value::String(maps[rng.below(maps.len())].clone());
+            fields.push("\"surface\":\"heightmap\"".into());
+            fields.push(format!("\"file\":{file}"));
+            fields.push(format!("\"pixel_um\":{}", rng.log_range(1e-3, 10.0)));
+            if rng.chance(0.3) {
+                fields.push(format!("\"height_scale_um\":{}", rng.log_range(1e-3, 1e3)));
+            }
+            if rng.chance(0.2) {
+                fields.push("\"tile_px\":16".into());
+            }
+        }
         _ => {
             fields.push("\"surface\":\"cd\"".into());
             if rng.chance(0.5) {
@@ -202,7 +267,12 @@ pub fn material(rng: &mut Rng, kind: usize) -> String {
     if !rng.chance(0.1) {
         fields.push("\"energy\":\"stam\"".to_string());
     }
-    if rng.chance(0.2) && matches!(surface, "gaussian" | "anisotropic" | "fractal") {
+    if rng.chance(0.2)
+        && matches!(
+            surface,
+            "gaussian" | "anisotropic" | "fractal" | "heightmap"
+        )
+    {
         fields.push(format!("\"rgb_nodes\":{}", rng.range(4.0, 65.0) as usize));
     }
     // Every third round's disc has rigorous orders instead: the paper's

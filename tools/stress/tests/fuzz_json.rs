@@ -20,7 +20,7 @@ static REFUSED: AtomicU64 = AtomicU64::new(0);
 static PROGRAM_RUNS: AtomicU64 = AtomicU64::new(0);
 
 /// Every key the parameters know (docs/parameters.md).
-const KEYS: [&str; 20] = [
+const KEYS: [&str; 24] = [
     "surface",
     "energy",
     "sigma_um",
@@ -41,6 +41,10 @@ const KEYS: [&str; 20] = [
     "series_tolerance",
     "rgb_nodes",
     "sigma_um_max",
+    "file",
+    "pixel_um",
+    "height_scale_um",
+    "tile_px",
 ];
 
 /// A refusal must name a key (as a whole word) or say what is wrong with the
@@ -619,7 +623,7 @@ fn object() -> impl Strategy<Value = String> {
 fn mutated_material() -> impl Strategy<Value = String> {
     (
         any::<u64>(),
-        0usize..7,
+        0usize..stress::gen::SURFACES.len(),
         prop::collection::vec(
             (0usize..3, any::<prop::sample::Index>(), key(), value()),
             0..3,

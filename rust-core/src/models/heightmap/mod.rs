@@ -1,0 +1,223 @@
+//! Measured or synthetic surfaces: the diffraction BRDF of a height map
+//! (docs/heightmap.md), Stam's general result on the map itself rather
+//! than on a statistical model of it.
+//!
+//! The map (`map.rs`: .npy or .csv, detrended) gives two tables
+//! (`welch.rs`): the coherent lobe's |chi(kappa)|^2 and the diffuse
+//! spectrum T(kappa, nu), with kappa = k |w| and nu = (u, v) / lambda:
+//!
+//! ```text
+//! K = k^4 T(k |w|, k (u, v) / 2 pi) / (4 pi^2),   f = F^2 G K,
+//! coherent reflectance F^2 |chi(2 k cos_i)|^2.
+//! ```
+//!
+//! Reads are written once, generic over `program::Real` with a `fetch` of
+//! a table entry: natively an index, in the JIT programs a gather
+//! (`program.rs`). Sampling (`sampling.rs`) draws a cell of T at the
+//! mirror's kappa from an alias table. Tables are shared by every
+//! material made from the same map file and parameters while one holds
+//! them (`cache`).
+
+mod cache;
+pub(crate) mod map;
+pub mod params;
+mod program;
+#[cfg(test)]
+mod program_tests;
+mod sampling;
+#[cfg(test)]
+mod tests;
+mod welch;
+
+pub use params::HeightMapParams;
+pub use sampling::Lobe;
+pub use welch::SpectrumTable;
+
+use crate::error::StamError;
+use crate::models::{
+    Shading, SurfaceModel, FLAG_ANISOTROPIC, FLAG_HAS_COHERENT, FLAG_SPECTRALLY_VARYING,
+    MAX_RGB_NODES,
+};
+use crate::optics::geometry::PairGeometry;
+use crate::program::Real;
+use crate::sampling::Component;
+use crate::spectrum::wavenumber_per_um;
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+/// 1 / (4 pi^2).
+const INV_4PI2: f64 = 1.0 / (4.0 * PI * PI);
+
+/// The height-map model of a material: the map's tables.
+pub struct HeightMap {
+    table: Arc<SpectrumTable>,
+}
+
+impl HeightMap {
+    pub fn new(p: &HeightMapParams) -> Result<HeightMap, StamError> {
+        Ok(HeightMap {
+            table: cache::table(p)?,
+        })
+    }
+
+    pub fn table(&self) -> &SpectrumTable {
+        &self.table
+    }
+
+    /// K at wavenumber k for the pair's (u, v, |w|), any `Real`.
+    #[inline]
+    pub(crate) fn kernel_with<R: Real>(
+        &self,
+        k_per_um: R,
+        w_abs: R,
+        u: R,
+        v: R,
+        fetch: impl Fn(R) -> R,
+    ) -> R {
+        let nu_scale = k_per_um * (0.5 / PI);
+        let t = self
+            .table
+            .read(k_per_um * w_abs, u * nu_scale, v * nu_scale, fetch);
+        let k2 = k_per_um * k_per_um;
+        t * (k2 * k2) * INV_4PI2
+    }
+
+    /// `kernel_with` at a wavenumber known when the program is built (the
+    /// native path, the RGB rule's nodes): k's powers are constants.
+    #[inline]
+    pub(crate) fn kernel_with_constant_k<R: Real>(
+        &self,
+        k_per_um: f64,
+        w_abs: R,
+        u: R,
+        v: R,
+        fetch: impl Fn(R) -> R,
+    ) -> R {
+        let nu_scale = k_per_um * (0.5 / PI);
+        let t = self
+            .table
+            .read(w_abs * k_per_um, u * nu_scale, v * nu_scale, fetch);
+        t * (k_per_um.powi(4) * INV_4PI2)
+    }
+
+    /// |chi(2 k cos_i)|^2, any `Real`.
+    #[inline]
+    pub(crate) fn coherent_with<R: Real>(
+        &self,
+        k_per_um: R,
+        cos_i: R,
+        fetch: impl Fn(R) -> R,
+    ) -> R {
+        self.table.chi2_read(k_per_um * cos_i * 2.0, fetch)
+    }
+
+    fn fetch_value(&self) -> impl Fn(f64) -> f64 + '_ {
+        |at: f64| self.table.values[at as usize] as f64
+    }
+
+    fn fetch_chi2(&self) -> impl Fn(f64) -> f64 + '_ {
+        |at: f64| self.table.chi2[at as usize] as f64
+    }
+}
+
+impl SpectrumTable {
+    /// T at (kappa, nu): linear in s = ln(1 + kappa / kappa_0) between
+    /// nodes, bilinear in nu on the frequency grid (8 fetches), 0 beyond
+    /// the grid's Nyquist frequency.
+    #[inline]
+    pub(crate) fn read<R: Real>(&self, kappa: R, nu_x: R, nu_y: R, fetch: impl Fn(R) -> R) -> R {
+        let a = kappa * (1.0 / self.kappa0) + 1.0;
+        let last_node = (self.nodes - 1) as f64;
+        let x = (a.ln() * (last_node / self.s_max)).clamp(0.0, last_node);
+        let i = x.floor().min(last_node - 1.0);
+        let t = x - i;
+        let n = self.tile as f64;
+        let half = (self.tile / 2) as f64;
+        let fx = nu_x * self.tile_um + half;
+        let fy = nu_y * self.tile_um + half;
+        let inside = fx.ge(0.0) & fx.le(n - 1.0) & fy.ge(0.0) & fy.le(n - 1.0);
+        let (fx, fy) = (fx.clamp(0.0, n - 1.0), fy.clamp(0.0, n - 1.0));
+        let (ix, iy) = (fx.floor().min(n - 2.0), fy.floor().min(n - 2.0));
+        let (tx, ty) = (fx - ix, fy - iy);
+        let base = (i * n + iy) * n + ix;
+        let plane = |at: R| {
+            let (v00, v01) = (fetch(at), fetch(at + 1.0));
+            let (v10, v11) = (fetch(at + n), fetch(at + (n + 1.0)));
+            let lo = v00 + (v01 - v00) * tx;
+            let hi = v10 + (v11 - v10) * tx;
+            lo + (hi - lo) * ty
+        };
+        let (e0, e1) = (plane(base), plane(base + n * n));
+        let e = e0 + (e1 - e0) * t;
+        // The table holds T (1 + kappa / kappa_0)^4.
+        let a2 = a * a;
+        R::select(inside, e / (a2 * a2), kappa.constant(0.0))
+    }
+
+    /// |chi(kappa)|^2, linear in s between the table's entries.
+    #[inline]
+    pub(crate) fn chi2_read<R: Real>(&self, kappa: R, fetch: impl Fn(R) -> R) -> R {
+        let last = (welch::CHI_NODES - 1) as f64;
+        let s = (kappa * (1.0 / self.kappa0) + 1.0).ln();
+        let x = (s * (last / self.s_max)).clamp(0.0, last);
+        let i = x.floor().min(last - 1.0);
+        let t = x - i;
+        let (c0, c1) = (fetch(i), fetch(i + 1.0));
+        c0 + (c1 - c0) * t
+    }
+}
+
+impl SurfaceModel for HeightMap {
+    type Params = HeightMapParams;
+    type Lobe = Lobe;
+
+    fn from_params(
+        p: &HeightMapParams,
+        _: &crate::optics::fresnel::Fresnel,
+    ) -> Result<HeightMap, StamError> {
+        HeightMap::new(p)
+    }
+
+    fn flags(&self) -> u32 {
+        FLAG_HAS_COHERENT | FLAG_ANISOTROPIC | FLAG_SPECTRALLY_VARYING
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.table.memory_bytes()
+    }
+
+    #[inline]
+    fn kernel(&self, k_per_um: f64, geom: &PairGeometry) -> f64 {
+        self.kernel_with_constant_k(k_per_um, geom.w.abs(), geom.u, geom.v, self.fetch_value())
+    }
+
+    fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
+        let rule = shading.rgb_rule;
+        let mut values = [0.0; MAX_RGB_NODES];
+        let values = &mut values[..rule.len()];
+        for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
+            *v = self.kernel(k, geom);
+        }
+        shading.integrate(geom.cos_half, values)
+    }
+
+    fn coherent_spectral(&self, shading: &Shading, cos_i: f64, lambda_nm: f64) -> f64 {
+        let k = wavenumber_per_um(lambda_nm);
+        shading.fresnel.reflectance(cos_i, lambda_nm)
+            * self.coherent_with(k, cos_i, self.fetch_chi2())
+    }
+
+    fn coherent_rgb(&self, shading: &Shading, cos_i: f64) -> [f64; 3] {
+        let rule = shading.rgb_rule;
+        let mut values = [0.0; MAX_RGB_NODES];
+        let values = &mut values[..rule.len()];
+        for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
+            *v = self.coherent_with(k, cos_i, self.fetch_chi2());
+        }
+        shading.integrate(cos_i, values)
+    }
+
+    fn spectral_component(&self, _: &Shading, wi: glam::DVec3, lambda_nm: f64) -> Component<Lobe> {
+        self.component(wi, lambda_nm)
+    }
+}
