@@ -13,6 +13,8 @@
 #                 scripts/render_animation.py, docs/animation.md)
 #   make compare  Mitsuba vs Rust-only comparison to out/compare/ (scripts/compare.py;
 #                 exits non-zero when a check fails)
+#   make heightmaps  the synthetic height maps of scenes/heightmap.xml:
+#                 scenes/heightmaps/*.npy (scripts/make_heightmaps.py, seconds)
 #   make guide    the pictures of docs/guide.md: docs/img/guide/*.png
 #                 (scripts/render_guide.py, about a minute on two cores)
 #   make wheel    the pip-installable package stam-diffraction: dist/*.whl
@@ -64,10 +66,10 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo animation compare guide render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress fuzz furnace FORCE
+.PHONY: all demo animation compare guide heightmaps render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress fuzz furnace FORCE
 all: plugin
 
-demo: setup plugin
+demo: setup plugin heightmaps
 	@start=$$(date +%s); \
 	$(PYTHON) scripts/render_gallery.py && \
 	echo "[demo] done: out/gallery/contact_sheet.png (renders $$(( $$(date +%s) - start )) s)"
@@ -84,6 +86,13 @@ compare: setup plugin render-tool
 
 guide: plugin
 	$(PYTHON) scripts/render_guide.py
+
+# The height maps of the `heightmap` surface (scenes/heightmap.xml): the
+# script writes all four, gaussian.npy last, so that file stands for them.
+heightmaps: scenes/heightmaps/gaussian.npy
+
+scenes/heightmaps/gaussian.npy: scripts/make_heightmaps.py
+	$(PYTHON) scripts/make_heightmaps.py --out scenes/heightmaps
 
 render-tool:
 	$(CARGO) build --release -p stam-render
@@ -146,7 +155,7 @@ test-rust:
 # out longest first (tests/conftest.py; --no-loadscope-reorder keeps that
 # order instead of xdist's by test count). The 20 slowest tests are listed at
 # the end (a slow CI machine's log shows where its time went).
-test-python: plugin render-tool
+test-python: plugin render-tool heightmaps
 	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder --durations=20 tests
 
 # Everything, in the order that fails fastest.
@@ -166,7 +175,7 @@ RUST_SLOW_TESTS := sampling_programs_pass_chi_square covered_disc_reflects_its_c
 	gaussian_rgb_table_is_lazy chi_square_detects_a_wrong_pdf \
 	sigma_texture_programs_serve_every_sigma conserving_is_reciprocal pdf_positive_where_brdf_is \
 	program_sizes conserving_rgb_matches_native efficiencies_are_reciprocal
-check: lint plugin
+check: lint plugin heightmaps
 	$(CARGO) test -p stam-core --lib --test stress_regressions -- $(addprefix --skip ,$(RUST_SLOW_TESTS))
 	$(CARGO) test -p stam-abi-check
 	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder --quick tests

@@ -19,6 +19,7 @@
  * private helpers and members.
  */
 
+#include <mitsuba/core/fresolver.h>
 #include <mitsuba/core/properties.h>
 #include <mitsuba/core/spectrum.h>
 #include <mitsuba/render/bsdf.h>
@@ -58,8 +59,9 @@ Diffraction BSDF (:monosp:`diffraction`)
 
  * - surface
    - |string|
-   - Microsurface model: ``gaussian``, ``fractal``, ``periodic`` or ``cd``
-     (compact disc: a periodic surface with Stam's dimensions).
+   - Microsurface model: ``gaussian``, ``fractal``, ``periodic``, ``cd``
+     (compact disc: a periodic surface with Stam's dimensions) or
+     ``heightmap`` (a measured or synthetic height map, ``docs/heightmap.md``).
      (Default: none, required)
    - |exposed| (as a string, see below)
  * - sigma_um
@@ -176,6 +178,30 @@ Diffraction BSDF (:monosp:`diffraction`)
      reflection on top, the orders diffracted inside and let out through
      it. (Default: 1, no cover)
    - |exposed|
+ * - file
+   - |string|
+   - Height maps: the map, a ``.npy`` array or a ``.csv`` table of heights
+     (one channel, rows along y, 16 to 4096 samples each way), found as a
+     bitmap's ``filename`` is (against the scene's folder and Mitsuba's
+     search path). (Default: none, required)
+   - |exposed| (a string)
+ * - pixel_um
+   - |float|
+   - Height maps: spacing of the map's samples. Micrometres, in
+     [1e-4, 100]; coarser than 0.09 um loses light scattered far from the
+     mirror at short wavelengths (a warning). (Default: none, required)
+   - |exposed|
+ * - height_scale_um
+   - |float|
+   - Height maps: micrometres per unit of the map's values, in
+     [1e-9, 1e6]. (Default: 1)
+   - |exposed|
+ * - tile_px
+   - |int|
+   - Height maps: edge of the Welch tiles that average the map's spectrum,
+     a power of two in [16, 512], at most the map's smaller edge. (Default:
+     20 correlation lengths of the map, 32 to 256)
+   - |exposed|
  * - series_tolerance
    - |float|
    - Gaussian surfaces: relative truncation tolerance of the Poisson series
@@ -183,9 +209,9 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed|
  * - rgb_nodes
    - |int|
-   - Gaussian and fractal surfaces: wavelength nodes of the RGB rule for
-     smooth spectra, an integer in [4, 64]. (Default: 12 for Gaussian, 8 for
-     fractal surfaces)
+   - Gaussian, fractal and height-map surfaces: wavelength nodes of the RGB
+     rule for smooth spectra, an integer in [4, 64]. (Default: 12 for
+     Gaussian, 8 for fractal, 24 for height-map surfaces)
    - |exposed|
  * - twist
    - |float| or |texture|
@@ -395,7 +421,12 @@ public:
                 } else if (type == PType::String) {
                     Param p;
                     p.name = name;
-                    set_text(p, it->template get<std::string>());
+                    std::string text = it->template get<std::string>();
+                    // A height map's file, found as a bitmap's is: against
+                    // the scene's folder and the resolver's search path
+                    if (name == "file")
+                        text = file_resolver()->resolve(text).string();
+                    set_text(p, text);
                     m_params.push_back(p);
                 } else if (type == PType::Bool) {
                     Param p;

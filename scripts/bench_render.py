@@ -5,7 +5,7 @@ in one process (repeated in a few fresh processes, whose median is the
 figure); prints the ratios and writes docs/plugin_speed.md.
 
     .venv/bin/python scripts/bench_render.py [--spp 64] [--size 128] [--repeats 5]
-        [--processes 3] [--write docs/plugin_speed.md]
+        [--processes 3] [--only heightmap,cd] [--write docs/plugin_speed.md]
 
 The scene: a sphere filling most of the frame (its disc covers 66% of the
 image) on a plane under a point light and a constant environment, path tracing
@@ -54,6 +54,14 @@ MATERIALS.update({name + ', Stam\'s formula': dict(bsdf, energy='stam')
 # "energy").
 MATERIALS['diffraction cd, rigorous orders'] = {'type': 'diffraction', 'surface': 'cd',
                                                  'orders': 'rigorous'}
+# A height map (docs/heightmap.md): the demo's Gaussian-correlated map
+# (`make heightmaps`), sigma 0.05 um, T 1 um.
+HEIGHTMAP = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                         'scenes', 'heightmaps', 'gaussian.npy')
+MATERIALS['diffraction heightmap (gaussian map)'] = {'type': 'diffraction',
+                                                     'surface': 'heightmap',
+                                                     'file': HEIGHTMAP, 'pixel_um': 0.08}
+BASELINE = 'roughconductor (baseline)'
 
 
 def scene(mi, bsdf, size, spp):
@@ -119,12 +127,14 @@ def run_one(args):
     for variant in args.variants.split(','):
         # JIT variants in Mitsuba's default (symbolic) mode
         mi = stam_mitsuba.setup(variant)
-        materials = dict(MATERIALS)
+        materials = {name: bsdf for name, bsdf in MATERIALS.items()
+                     if name == BASELINE or not args.only
+                     or any(o in name for o in args.only.split(','))}
         print('[bench_render] %s: %d interleaved rounds of %d renders...'
               % (variant, args.repeats, len(materials)), flush=True)
         best = time_renders(mi, materials, lambda bsdf: scene(mi, bsdf, args.size, args.spp),
                             args.repeats)
-        base = best['roughconductor (baseline)']
+        base = best[BASELINE]
         for name, t in best.items():
             rows.append((variant, name, t, t / base))
             print('[bench_render] %-16s %-46s %7.3f s  %5.2fx' % (variant, name, t, t / base),
@@ -139,7 +149,7 @@ def run_processes(args):
     (variant, material, median seconds, median ratio, lowest, highest)."""
     child = [sys.executable, os.path.abspath(__file__), '--child', '--spp', str(args.spp),
              '--size', str(args.size), '--repeats', str(args.repeats),
-             '--variants', args.variants]
+             '--variants', args.variants] + (['--only', args.only] if args.only else [])
     runs = []
     for k in range(args.processes):
         print('[bench_render] process %d of %d' % (k + 1, args.processes), flush=True)
@@ -167,6 +177,8 @@ def main():
                     help='independent processes; the table gives the median ratio and the range')
     ap.add_argument('--variants',
                     default='scalar_rgb,scalar_spectral,llvm_ad_rgb,llvm_ad_spectral')
+    ap.add_argument('--only', default='',
+                    help='comma-separated parts of material names to time (the baseline always)')
     ap.add_argument('--write', default=None, help='markdown file to write the table to')
     ap.add_argument('--child', action='store_true', help=argparse.SUPPRESS)
     args = ap.parse_args()
