@@ -676,3 +676,118 @@ fn fractal_maps_give_the_fractal_brdf() {
     assert!((0.9..1.1).contains(&mean), "mean {mean}");
     assert!((0.9..1.1).contains(&q(0.5)), "median {}", q(0.5));
 }
+
+/// Survey: the RGB rule's error against the 1 nm reference (gamut-mapped,
+/// relative to the pair's largest channel) and its cost, by node count,
+/// on the Gaussian map and a sine grating map, at pairs over the lobes.
+#[test]
+#[ignore]
+fn rgb_nodes_survey() {
+    let n = 512;
+    let grating: Vec<f64> = (0..n * n)
+        .map(|i| 0.06 * (2.0 * PI * (i % n) as f64 * 0.08 / 1.6).sin())
+        .collect();
+    let grating = write_npy("survey-grating.npy", n, n, &grating);
+    let mut rng = Rng(8);
+    let pairs: Vec<(DVec3, DVec3)> = (0..300)
+        .map(|_| {
+            let [a, b, c] = rng.three();
+            let wi = incidence(60.0 * a, 6.0 * b);
+            let mirror = DVec3::new(-wi.x, -wi.y, wi.z);
+            let t = 0.6 * c;
+            let wo = (mirror + DVec3::new(t * (9.0 * b).cos(), 0.3 * t * (9.0 * b).sin(), 0.0))
+                .normalize();
+            (wi, wo)
+        })
+        .filter(|(_, wo)| wo.z > 0.05)
+        .collect();
+    for (name, file) in [
+        ("gaussian map", gaussian_map_file()),
+        ("grating map", grating),
+    ] {
+        let reference = material(&map_json(&file, r#","fresnel":"gold""#));
+        let refs: Vec<[f64; 3]> = pairs
+            .iter()
+            .map(|&(wi, wo)| crate::spectrum::gamut_map(reference.eval_rgb_reference(wi, wo, 1.0)))
+            .collect();
+        for nodes in [8, 12, 16, 24, 32, 48, 64] {
+            let brdf = material(&map_json(
+                &file,
+                &format!(r#","fresnel":"gold","rgb_nodes":{nodes}"#),
+            ));
+            let start = std::time::Instant::now();
+            let got: Vec<[f64; 3]> = pairs
+                .iter()
+                .map(|&(wi, wo)| brdf.eval_rgb(wi, wo))
+                .collect();
+            let ns = start.elapsed().as_nanos() as f64 / pairs.len() as f64;
+            let mut errors: Vec<f64> = got
+                .iter()
+                .zip(&refs)
+                .filter(|(_, r)| r.iter().cloned().fold(0.0, f64::max) > 1e-6)
+                .map(|(g, r)| {
+                    let scale = r.iter().cloned().fold(0.0, f64::max);
+                    (0..3)
+                        .map(|c| (g[c] - r[c]).abs() / scale)
+                        .fold(0.0, f64::max)
+                })
+                .collect();
+            errors.sort_by(f64::total_cmp);
+            let q = |p: f64| errors[((errors.len() - 1) as f64 * p) as usize];
+            println!(
+                "{name}, {nodes} nodes: p50 {:.2e}, p90 {:.2e}, max {:.2e} ({} pairs), {ns:.0} ns per eval",
+                q(0.5),
+                q(0.9),
+                q(1.0),
+                errors.len()
+            );
+        }
+    }
+}
+
+/// The white furnace with the default (energy-conserving) material:
+/// albedo by sample weights at most 1 + 3 standard errors at normal,
+/// oblique and grazing incidence, for the Gaussian map and a rough map
+/// (sigma 0.4 um: Stam's albedo near grazing exceeds 1).
+#[test]
+fn white_furnace_at_most_one() {
+    let rough = synthetic_map(256, 0.08, 9, gaussian_psd(0.4, 2.0), Some(0.4));
+    let rough = write_npy("rough.npy", 256, 256, &rough);
+    let mut rng = Rng(12);
+    let mut worst: f64 = 0.0;
+    for file in [gaussian_map_file(), rough] {
+        let json = map_json(&file, r#","fresnel":1"#);
+        let brdf = Brdf::from_json(&json).unwrap();
+        for cos in [0.9f64, 0.5, 0.15, 0.03] {
+            let wi = DVec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+            for lambda in [Some(450.0), Some(650.0)] {
+                let strategy = brdf.sampler(wi, lambda);
+                let l = lambda.unwrap();
+                let weights: Vec<f64> = (0..8000)
+                    .map(|_| {
+                        let s = strategy.sample(rng.three());
+                        if !(s.pdf > 0.0) {
+                            0.0
+                        } else if s.coherent {
+                            brdf.coherent_spectral(wi, l) / s.pdf
+                        } else {
+                            brdf.eval_spectral(wi, s.wo, l) * s.wo.z / s.pdf
+                        }
+                    })
+                    .collect();
+                let (mean, var) = crate::testing::mean_var(&weights);
+                let se = (var / weights.len() as f64).sqrt();
+                println!(
+                    "{} cos {cos} {l} nm: albedo {mean:.4} +- {se:.4}",
+                    file.display()
+                );
+                assert!(
+                    mean <= 1.0 + 3.0 * se,
+                    "{json} cos {cos} {l}: {mean} +- {se}"
+                );
+                worst = worst.max(mean);
+            }
+        }
+    }
+    println!("largest albedo {worst:.4}");
+}
