@@ -181,3 +181,21 @@ def test_demo_scene_renders(variant):
     assert np.all(np.isfinite(img)) and img.min() >= 0
     assert img.mean() > 1e-3
     print('%s: mean %.4f' % (variant, img.mean()))
+
+
+def test_an_exr_map_renders_as_its_npy_twin(tmp_path):
+    """A map saved by Mitsuba as a one-channel OpenEXR image gives the same
+    BSDF as the .npy it came from."""
+    use('scalar_rgb')
+    h = np.load(os.path.join(MAPS, 'scales.npy'))[:256, :256].astype(np.float32)
+    np.save(tmp_path / 'map.npy', h)
+    mi.Bitmap(h[:, :, None], mi.Bitmap.PixelFormat.Y).write(str(tmp_path / 'map.exr'))
+    wo = lobe_dirs(WI, 40, seed=6)
+    ctx = mi.BSDFContext()
+    vals = []
+    for ext in ('npy', 'exr'):
+        b = mi.load_dict({'type': 'diffraction', 'surface': 'heightmap', 'pixel_um': 0.08,
+                          'file': str(tmp_path / ('map.' + ext))})
+        vals.append(np.array([to_np(b.eval(ctx, make_si(WI), mi.Vector3f(d))) for d in wo]))
+    assert vals[0].max() > 0
+    assert np.allclose(vals[0], vals[1], rtol=1e-6, atol=1e-9)

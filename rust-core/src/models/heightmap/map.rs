@@ -1,5 +1,7 @@
 //! Reading a height map: NumPy's .npy (the format of scientific Python and
-//! of most AFM/profilometer exporters' scripts) and plain CSV, then the
+//! of most AFM/profilometer exporters' scripts), OpenEXR (Mitsuba's and
+//! the renderers' image format, through the `exr` crate) and plain CSV,
+//! then the
 //! heights detrended (mean and tilt removed: a tilted sample is a tilted
 //! mirror, not a rougher surface).
 //!
@@ -104,10 +106,12 @@ pub fn read_map(path: &str) -> Result<(usize, usize, Vec<f64>), StamError> {
         read_npy(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
     } else if lower.ends_with(".csv") || lower.ends_with(".txt") {
         read_csv(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+    } else if lower.ends_with(".exr") {
+        read_exr(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
     } else {
         Err(StamError::new(format!(
-            "parameter 'file' = '{path}': accepted formats are .npy and .csv (an EXR or TIFF \
-             map converts with numpy: np.save('map.npy', imageio.imread('map.exr')[..., 0]))"
+            "parameter 'file' = '{path}': accepted formats are .npy, .exr and .csv (a TIFF or \
+             PNG map converts with numpy: np.save('map.npy', imageio.imread('map.tif')))"
         )))
     }
 }
@@ -202,6 +206,34 @@ fn read_npy(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
         // Row-major (row j, column c) from the file's order.
         let (j, c) = (i / nx, i % nx);
         *v = decode(if fortran { c * ny + j } else { i });
+    }
+    Ok((nx, ny, values))
+}
+
+/// An OpenEXR image's first layer: its one channel, or of several the
+/// luminance `Y`, else `R` (a height map saved as an RGB image), else the
+/// first; rows top to bottom along y, as the file stores them.
+fn read_exr(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(std::io::Cursor::new(bytes))
+        .map_err(|e| format!("not a readable OpenEXR image ({e})"))?;
+    let layer = &image.layer_data;
+    let (nx, ny) = (layer.size.width(), layer.size.height());
+    let list = &layer.channel_data.list;
+    let named = |name: &str| list.iter().find(|c| c.name.eq_case_insensitive(name));
+    let channel = named("Y")
+        .or_else(|| named("R"))
+        .or(list.first())
+        .ok_or("the image has no channel")?;
+    let values: Vec<f64> = channel.sample_data.values_as_f32().map(f64::from).collect();
+    if values.len() != nx * ny {
+        return Err(format!("{} samples for {nx} x {ny} pixels", values.len()));
     }
     Ok((nx, ny, values))
 }

@@ -246,7 +246,8 @@ fn a_blazed_map_reflects_towards_its_facets_mirror() {
     assert!(towards > 20.0 * away, "{towards} vs {away}");
 }
 
-/// The .npy reader: f4, f8, integers, big-endian, Fortran order; CSV.
+/// The .npy reader: f4, f8, integers, big-endian, Fortran order; CSV;
+/// OpenEXR.
 #[test]
 fn readers_accept_numpy_and_csv() {
     use super::map::read_map;
@@ -325,6 +326,32 @@ fn readers_accept_numpy_and_csv() {
     let (x, y, got) = read_map(&csv.to_string_lossy()).unwrap();
     assert_eq!((x, y), (nx, ny));
     assert_eq!(got, values);
+    // OpenEXR: one channel, and an RGB image whose R holds the heights.
+    use exr::prelude::*;
+    let f32s: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+    for (name, channels) in [
+        (
+            "y.exr",
+            vec![AnyChannel::new("Y", FlatSamples::F32(f32s.clone()))],
+        ),
+        (
+            "rgb.exr",
+            vec![
+                AnyChannel::new("B", FlatSamples::F32(vec![0.0; nx * ny])),
+                AnyChannel::new("G", FlatSamples::F32(vec![0.0; nx * ny])),
+                AnyChannel::new("R", FlatSamples::F32(f32s.clone())),
+            ],
+        ),
+    ] {
+        let path = dir.join(name);
+        let image = Image::from_channels((nx, ny), AnyChannels::sort(channels.into()));
+        image.write().to_file(&path).unwrap();
+        let (x, y, got) = read_map(&path.to_string_lossy()).unwrap();
+        assert_eq!((x, y), (nx, ny), "{name}");
+        for (g, v) in got.iter().zip(&values) {
+            assert!((g - v).abs() <= 1e-7, "{name}: {g} vs {v}");
+        }
+    }
 }
 
 /// Refusals by name: a missing file, an unknown format, a NaN (with its
@@ -352,6 +379,10 @@ fn bad_maps_are_refused_by_name() {
         ),
         (
             map_json(&good.with_extension("exr"), ""),
+            "not a readable OpenEXR image",
+        ),
+        (
+            map_json(&good.with_extension("tif"), ""),
             "parameter 'file'",
         ),
         (map_json(&nan, ""), "at row 5, column 7"),
@@ -364,6 +395,7 @@ fn bad_maps_are_refused_by_name() {
         ),
     ];
     std::fs::write(good.with_extension("exr"), b"not a map").unwrap();
+    std::fs::write(good.with_extension("tif"), b"not a map").unwrap();
     for (json, expected) in cases {
         let message = err(&json);
         assert!(message.contains(expected), "{json}: {message}");
