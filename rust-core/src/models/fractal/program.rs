@@ -39,6 +39,10 @@ use crate::models::{FactorMaker, SampleProgram, Shading, SurfacePrograms};
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::{Builder, ParamId, Table, Value};
+use crate::sampling::program::{
+    component_choice, defensive_density_program, defensive_direction_program, pick,
+    unit_interval_program, U_MAX,
+};
 use crate::sampling::{rgb_sampling_nodes, DEFENSIVE_FRACTION};
 use crate::spectrum::wavenumber_per_um;
 use std::f64::consts::PI;
@@ -46,10 +50,6 @@ use std::f64::consts::PI;
 /// Largest ln K (and ln pdf) a program keeps: e^87 times a series factor
 /// (at most 3) stays finite in f32.
 const LN_MAX: f64 = 87.0;
-
-/// The largest f32 below 1: uniforms are clamped into [0, U_MAX] (the
-/// native `unit_interval`, whose 1 - 2^-52 rounds to 1 in f32).
-const U_MAX: f64 = 1.0 - 1.0 / 16_777_216.0;
 
 /// Spread in y (times 2 or alpha) up to which the RGB nodes share the
 /// series' exponentials through constant factors (f32-safe).
@@ -290,29 +290,17 @@ impl SurfacePrograms for Fractal {
     ) -> Option<SampleProgram<'a>> {
         let f = &self.surface;
         let proposal = RadialProposal::new(&f.profile);
-        let [r0, r1, r2] = u.map(|x| x.finite().select(x, 0.0).clamp(0.0, U_MAX));
+        let [r0, r1, r2] = u.map(unit_interval_program);
         // The component (RGB: one of four wavelengths), then its part.
         let terms = component_terms(b, f, lambda_nm);
-        let count = terms.len();
-        let scaled = r0 * count as f64;
-        let j = scaled.floor().min((count - 1) as f64);
-        let r = (scaled - j).clamp(0.0, U_MAX);
-        let term = terms[1..]
-            .iter()
-            .enumerate()
-            .fold(terms[0], |acc, (i, &t)| j.eq((i + 1) as f64).select(t, acc));
-        let ln_c = term + f.lobe_scale_shared(wi[2]);
+        let (j, r) = component_choice(r0, terms.len());
+        let ln_c = pick(j, &terms) + f.lobe_scale_shared(wi[2]);
         let p_lobe = f.lobe_share(&proposal, ln_c);
         let p_def = 1.0 - p_lobe;
         let phi = r2 * (2.0 * PI);
         let (cos_phi, sin_phi) = (phi.cos(), phi.sin());
-        // Defensive: half cosine-weighted (`cosine_direction`), half
-        // uniform (`uniform_direction`).
-        let cosine = r.lt(p_def * 0.5);
-        let z_cos = (1.0 - r1).max(0.0).sqrt().max(2.0 * MIN_COS);
-        let z_uni = (1.0 - r1).max(2.0 * MIN_COS);
-        let rho = cosine.select(r1.sqrt(), (1.0 - z_uni * z_uni).max(0.0).sqrt());
-        let defensive = [rho * cos_phi, rho * sin_phi, cosine.select(z_cos, z_uni)];
+        // Defensive: half cosine-weighted, half uniform.
+        let defensive = defensive_direction_program(r.lt(p_def * 0.5), r1, cos_phi, sin_phi);
         // The lobe: an entry of the alias table from r1, the position
         // inside it from the rest of r0.
         let t = ((r - p_def) / p_lobe).clamp(0.0, U_MAX);
@@ -371,7 +359,7 @@ impl SurfacePrograms for Fractal {
         let y_hi = proposal.y_lo + cells * proposal.h;
         let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
         let ln_r2 = (u * u + v * v).ln();
-        let defensive = (wo[2] * (1.0 / PI) + 0.5 / PI) * 0.5;
+        let defensive = defensive_density_program(wo[2]);
         let shared = f.lobe_scale_shared(wi[2]);
         let terms = component_terms(b, f, lambda_nm);
         let count = terms.len();

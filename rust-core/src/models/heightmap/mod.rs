@@ -82,24 +82,6 @@ impl HeightMap {
         t * (k2 * k2) * INV_4PI2
     }
 
-    /// `kernel_with` at a wavenumber known when the program is built (the
-    /// native path, the RGB rule's nodes): k's powers are constants.
-    #[inline]
-    pub(crate) fn kernel_with_constant_k<R: Real>(
-        &self,
-        k_per_um: f64,
-        w_abs: R,
-        u: R,
-        v: R,
-        fetch: impl Fn(R) -> R,
-    ) -> R {
-        let nu_scale = k_per_um * (0.5 / PI);
-        let t = self
-            .table
-            .read(w_abs * k_per_um, u * nu_scale, v * nu_scale, fetch);
-        t * (k_per_um.powi(4) * INV_4PI2)
-    }
-
     /// |chi(2 k cos_i)|^2, any `Real`.
     #[inline]
     pub(crate) fn coherent_with<R: Real>(
@@ -188,7 +170,7 @@ impl SurfaceModel for HeightMap {
 
     #[inline]
     fn kernel(&self, k_per_um: f64, geom: &PairGeometry) -> f64 {
-        self.kernel_with_constant_k(k_per_um, geom.w.abs(), geom.u, geom.v, self.fetch_value())
+        self.kernel_with(k_per_um, geom.w.abs(), geom.u, geom.v, self.fetch_value())
     }
 
     fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {

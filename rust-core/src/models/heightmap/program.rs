@@ -20,16 +20,13 @@ use crate::models::{FactorMaker, FactorProgram, SampleProgram, Shading, SurfaceP
 use crate::optics::geometry::MIN_COS;
 use crate::optics::program::{PairProgram, Vec3};
 use crate::program::{Builder, Table, Value};
+use crate::sampling::program::{
+    component_choice, defensive_density_program, defensive_direction_program, pick,
+    unit_interval_program, U_MAX,
+};
 use crate::sampling::{draw_alias, rgb_sampling_nodes, DEFENSIVE_FRACTION};
 use crate::spectrum::wavenumber_per_um;
 use std::f64::consts::PI;
-
-/// The largest f32 below 1: uniforms are clamped into [0, U_MAX].
-const U_MAX: f64 = 1.0 - 1.0 / 16_777_216.0;
-
-fn uniform(u: Value) -> Value {
-    u.finite().select(u, 0.0).clamp(0.0, U_MAX)
-}
 
 /// Per node: the density per unit nu^2 of a cell is value * scale +
 /// uniform (`SpectrumTable::cell_density`).
@@ -127,9 +124,7 @@ impl SurfacePrograms for HeightMap {
         let values: Vec<Value> = rule
             .k_per_um
             .iter()
-            .map(|&k| {
-                self.kernel_with_constant_k(k, w_abs, pair.u, pair.v, |at| b.gather(table, at))
-            })
+            .map(|&k| self.kernel_with(b.c(k), w_abs, pair.u, pair.v, |at| b.gather(table, at)))
             .collect();
         Some(rule.integrate_program(b, shading.fresnel, pair.cos_half, &values))
     }
@@ -199,38 +194,24 @@ impl SurfacePrograms for HeightMap {
         let table = self.table();
         let chi2 = self.chi2_table(b);
         let alias = b.table(table.alias.clone());
-        let [r0, r1, r2] = u.map(uniform);
+        let [r0, r1, r2] = u.map(unit_interval_program);
         // The component (RGB: one of four wavelengths), then its part, as
         // `Mixture::sample_direction`.
         let comps = self.components(b, chi2, wi[2], lambda_nm);
-        let count = comps.len();
-        let scaled = r0 * count as f64;
-        let j = scaled.floor().min((count - 1) as f64);
-        let r = (scaled - j).clamp(0.0, U_MAX);
-        let pick = |f: &dyn Fn(&ComponentProgram<'a>) -> Value<'a>| {
-            comps[1..]
-                .iter()
-                .enumerate()
-                .fold(f(&comps[0]), |acc, (i, c)| {
-                    j.eq((i + 1) as f64).select(f(c), acc)
-                })
+        let (j, r) = component_choice(r0, comps.len());
+        let field = |f: fn(&ComponentProgram<'a>) -> Value<'a>| {
+            pick(j, &comps.iter().map(f).collect::<Vec<_>>())
         };
-        let (k, p_coh) = (pick(&|c| c.k), pick(&|c| c.p_coh));
-        let (node, upper) = (pick(&|c| c.node), pick(&|c| c.upper));
+        let (k, p_coh) = (field(|c| c.k), field(|c| c.p_coh));
+        let (node, upper) = (field(|c| c.node), field(|c| c.upper));
         let coherent = r.lt(p_coh);
         let rest = r - p_coh;
         let p_rest = 1.0 - p_coh;
         let p_def = p_rest * DEFENSIVE_FRACTION;
         let p_lobe = p_rest * (1.0 - DEFENSIVE_FRACTION);
-        // Defensive: half cosine-weighted, half uniform (`cosine_direction`,
-        // `uniform_direction`).
+        // Defensive: half cosine-weighted, half uniform.
         let phi = r2 * (2.0 * PI);
-        let (cos_phi, sin_phi) = (phi.cos(), phi.sin());
-        let cosine = rest.lt(p_def * 0.5);
-        let z_cos = (1.0 - r1).max(0.0).sqrt().max(2.0 * MIN_COS);
-        let z_uni = (1.0 - r1).max(2.0 * MIN_COS);
-        let rho = cosine.select(r1.sqrt(), (1.0 - z_uni * z_uni).max(0.0).sqrt());
-        let defensive = [rho * cos_phi, rho * sin_phi, cosine.select(z_cos, z_uni)];
+        let defensive = defensive_direction_program(rest.lt(p_def * 0.5), r1, phi.cos(), phi.sin());
         // The lobe: the node (by the upper one's weight), a cell of it from
         // r1, the point inside the cell from the rest of r0 and r2.
         let t = ((rest - p_def) / p_lobe).clamp(0.0, U_MAX);
@@ -283,7 +264,7 @@ impl SurfacePrograms for HeightMap {
         let density = b.table(node_density_table(table));
         let cells = (table.tile * table.tile) as f64;
         let (u, v) = (-(wi[0] + wo[0]), -(wi[1] + wo[1]));
-        let defensive = (wo[2] * (1.0 / PI) + 0.5 / PI) * 0.5;
+        let defensive = defensive_density_program(wo[2]);
         let comps = self.components(b, chi2, wi[2], lambda_nm);
         let count = comps.len() as f64;
         let sum = comps

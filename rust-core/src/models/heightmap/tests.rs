@@ -468,6 +468,23 @@ fn chi2_native_sampling() {
     assert!(failures.is_empty(), "{failures:?}");
 }
 
+/// T = S / kappa^2 of Gaussian heights (rms sigma, correlation length t)
+/// at kappa and |q| (rad/um) by the Gaussian model's series summed
+/// directly; its kappa -> 0 limit, the heights' spectrum, at 0.
+fn gaussian_series_t(sigma: f64, t: f64, kappa: f64, q: f64) -> f64 {
+    if kappa == 0.0 {
+        return gaussian_psd(sigma, t)(q);
+    }
+    let g = (kappa * sigma).powi(2);
+    let mut sum = 0.0;
+    let mut term = (-g).exp();
+    for m in 1..200 {
+        term *= g / m as f64;
+        sum += term / m as f64 * (-q * q * t * t / (4.0 * m as f64)).exp();
+    }
+    PI * t * t * sum / (kappa * kappa)
+}
+
 /// Survey, by tile size: the table's reads over the lobe against the
 /// Gaussian series, at nodes and between them (the tile choice).
 #[test]
@@ -483,19 +500,7 @@ fn print_gaussian_map_bias_by_node() {
             let kappa = table.kappa0 * (table.s_max * x / (table.nodes - 1) as f64).exp_m1();
             let scale = (1.0 + kappa / table.kappa0).powi(4);
             // S / kappa^2 of the Gaussian series: e^-g pi T^2 sum g^m / (m! m) exp(-q^2 T^2 / 4m) / kappa^2.
-            let g = (kappa * sigma).powi(2);
-            let model = |q: f64| {
-                if kappa == 0.0 {
-                    return PI * t * t * sigma * sigma * (-q * q * t * t / 4.0).exp();
-                }
-                let mut sum = 0.0;
-                let mut term = (-g).exp();
-                for m in 1..200 {
-                    term *= g / m as f64;
-                    sum += term / m as f64 * (-q * q * t * t / (4.0 * m as f64)).exp();
-                }
-                PI * t * t * sum / (kappa * kappa)
-            };
+            let model = |q: f64| gaussian_series_t(sigma, t, kappa, q);
             let (mut num, mut den) = (0.0, 0.0);
             let peak = model(0.0);
             for iy in 0..tile {
@@ -573,19 +578,7 @@ fn print_near_mirror() {
         2.0 * crate::spectrum::wavenumber_per_um(550.0),
         crate::spectrum::wavenumber_per_um(650.0),
     ] {
-        let g = (kappa * sigma).powi(2);
-        let model = |q: f64| {
-            if kappa == 0.0 {
-                return PI * t * t * sigma * sigma * (-q * q * t * t / 4.0).exp();
-            }
-            let mut sum = 0.0;
-            let mut term = (-g).exp();
-            for m in 1..200 {
-                term *= g / m as f64;
-                sum += term / m as f64 * (-q * q * t * t / (4.0 * m as f64)).exp();
-            }
-            PI * t * t * sum / (kappa * kappa)
-        };
+        let model = |q: f64| gaussian_series_t(sigma, t, kappa, q);
         let mut acc = [0.0; 9];
         for seed in 11..19 {
             let h = synthetic_map(1024, 0.08, seed, gaussian_psd(sigma, t), Some(sigma));
