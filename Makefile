@@ -174,7 +174,9 @@ RUST_SLOW_TESTS := sampling_programs_pass_chi_square covered_disc_reflects_its_c
 	texture_sampling_passes_chi_square at_built_rgb_eval_equals_the_plain_one \
 	gaussian_rgb_table_is_lazy chi_square_detects_a_wrong_pdf \
 	sigma_texture_programs_serve_every_sigma conserving_is_reciprocal pdf_positive_where_brdf_is \
-	program_sizes conserving_rgb_matches_native efficiencies_are_reciprocal
+	program_sizes conserving_rgb_matches_native efficiencies_are_reciprocal \
+	gaussian_maps_give_the_gaussian_brdf fractal_maps_give_the_fractal_brdf \
+	heightmap::tests::chi2_native_sampling heightmap::tests::white_furnace_at_most_one
 check: lint plugin heightmaps
 	$(CARGO) test -p stam-core --lib --test stress_regressions -- $(addprefix --skip ,$(RUST_SLOW_TESTS))
 	$(CARGO) test -p stam-abi-check
@@ -182,7 +184,7 @@ check: lint plugin heightmaps
 
 # ns per evaluation (docs/performance.md) and run time against error of every
 # accuracy knob (docs/accuracy_speed.md, docs/pareto_*.png).
-bench-render: plugin
+bench-render: plugin heightmaps
 	$(PYTHON) scripts/bench_render.py --repeats 7 --processes 3 --write docs/plugin_speed.md
 	$(PYTHON) scripts/bench_render.py --repeats 5 --processes 3 \
 		--variants scalar_spectral_polarized,llvm_ad_spectral_polarized

@@ -21,8 +21,11 @@ const RGB_G_LO: f64 = 2e-8;
 /// Columns of the RGB program table reach where ln S of every node is below
 /// this: beyond it f is below f32's range whatever G and 1/w^2 are.
 const RGB_CUT: f64 = -250.0;
-/// Largest RGB program table (bytes).
-const RGB_MAX_BYTES: usize = 8 << 20;
+/// Largest RGB program table (bytes; 8M values, which an f32 index
+/// addresses exactly). Anisotropic metals with many RGB nodes and long
+/// correlation lengths take the per-node layout: the stress run's took
+/// 9.5-16.2 MB, above the 8 MB this was before (they had no RGB program).
+const RGB_MAX_BYTES: usize = 32 << 20;
 
 /// The RGB program's per-material table (see the module documentation).
 pub(crate) struct RgbProgramTable {
