@@ -177,7 +177,7 @@ RUST_SLOW_TESTS := sampling_programs_pass_chi_square covered_disc_reflects_its_c
 	program_sizes conserving_rgb_matches_native efficiencies_are_reciprocal \
 	gaussian_maps_give_the_gaussian_brdf fractal_maps_give_the_fractal_brdf \
 	heightmap::tests::chi2_native_sampling heightmap::tests::white_furnace_at_most_one
-check: lint plugin heightmaps
+check: lint plugin render-tool heightmaps
 	$(CARGO) test -p stam-core --lib --test stress_regressions -- $(addprefix --skip ,$(RUST_SLOW_TESTS))
 	$(CARGO) test -p stam-abi-check
 	$(PYTHON) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder --quick tests
