@@ -108,11 +108,7 @@ impl SpectrumTable {
     /// the grid's Nyquist frequency.
     #[inline]
     pub(crate) fn read<R: Real>(&self, kappa: R, nu_x: R, nu_y: R, fetch: impl Fn(R) -> R) -> R {
-        let a = kappa * (1.0 / self.kappa0) + 1.0;
-        let last_node = (self.nodes - 1) as f64;
-        let x = (a.ln() * (last_node / self.s_max)).clamp(0.0, last_node);
-        let i = x.floor().min(last_node - 1.0);
-        let t = x - i;
+        let (a, i, t) = self.place_in_s(kappa, self.nodes);
         let n = self.tile as f64;
         let half = (self.tile / 2) as f64;
         let fx = nu_x * self.tile_um + half;
@@ -136,14 +132,23 @@ impl SpectrumTable {
         R::select(inside, e / (a2 * a2), kappa.constant(0.0))
     }
 
+    /// Where kappa lies among `entries` entries uniform in s = ln(1 +
+    /// kappa / kappa_0) over [0, s_max] (the nodes of T, the |chi|^2
+    /// table): 1 + kappa / kappa_0, the lower entry and the upper one's
+    /// weight.
+    #[inline]
+    pub(crate) fn place_in_s<R: Real>(&self, kappa: R, entries: usize) -> (R, R, R) {
+        let a = kappa * (1.0 / self.kappa0) + 1.0;
+        let last = (entries - 1) as f64;
+        let x = (a.ln() * (last / self.s_max)).clamp(0.0, last);
+        let i = x.floor().min(last - 1.0);
+        (a, i, x - i)
+    }
+
     /// |chi(kappa)|^2, linear in s between the table's entries.
     #[inline]
     pub(crate) fn chi2_read<R: Real>(&self, kappa: R, fetch: impl Fn(R) -> R) -> R {
-        let last = (welch::CHI_NODES - 1) as f64;
-        let s = (kappa * (1.0 / self.kappa0) + 1.0).ln();
-        let x = (s * (last / self.s_max)).clamp(0.0, last);
-        let i = x.floor().min(last - 1.0);
-        let t = x - i;
+        let (_, i, t) = self.place_in_s(kappa, welch::CHI_NODES);
         let (c0, c1) = (fetch(i), fetch(i + 1.0));
         c0 + (c1 - c0) * t
     }

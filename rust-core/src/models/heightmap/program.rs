@@ -28,21 +28,11 @@ use crate::sampling::{draw_alias, rgb_sampling_nodes, DEFENSIVE_FRACTION};
 use crate::spectrum::wavenumber_per_um;
 use std::f64::consts::PI;
 
-/// Per node: the density per unit nu^2 of a cell is value * scale +
-/// uniform (`SpectrumTable::cell_density`).
+/// Per node: the cell density's scale and flat part
+/// (`SpectrumTable::node_density`).
 fn node_density_table(table: &SpectrumTable) -> Vec<f32> {
-    let cells = (table.tile * table.tile) as f64;
-    let area = table.tile_um * table.tile_um;
-    table
-        .totals
-        .iter()
-        .flat_map(|&total| {
-            if total > 0.0 {
-                [(area / total) as f32, 0.0]
-            } else {
-                [0.0, (area / cells) as f32]
-            }
-        })
+    (0..table.nodes)
+        .flat_map(|node| table.node_density(node).map(|x| x as f32))
         .collect()
 }
 

@@ -29,11 +29,8 @@ pub struct Lobe {
 /// Where the mirror's kappa falls among the nodes: the lower node and the
 /// upper one's weight.
 pub(super) fn mirror_nodes<R: Real>(table: &SpectrumTable, k_per_um: R, cos_i: R) -> (R, R) {
-    let last = (table.nodes - 1) as f64;
-    let a = k_per_um * cos_i * (2.0 / table.kappa0) + 1.0;
-    let x = (a.ln() * (last / table.s_max)).clamp(0.0, last);
-    let i = x.floor().min(last - 1.0);
-    (i, x - i)
+    let (_, i, t) = table.place_in_s(k_per_um * cos_i * 2.0, table.nodes);
+    (i, t)
 }
 
 impl SpectrumTable {
@@ -61,12 +58,22 @@ impl SpectrumTable {
     /// cell's share of the node's total over its area 1 / tile_um^2.
     fn cell_density(&self, node: usize, cell: usize) -> f64 {
         let cells = self.tile * self.tile;
+        let [scale, flat] = self.node_density(node);
+        self.values[node * cells + cell] as f64 * scale + flat
+    }
+
+    /// Node `node`'s cell density per unit nu^2 as value * scale + flat:
+    /// the cell's share of the node's total over the cell's area 1 /
+    /// tile_um^2, or, for an empty node (whose alias table is the uniform
+    /// law), the same for every cell. The programs read these pairs.
+    pub(super) fn node_density(&self, node: usize) -> [f64; 2] {
+        let area = self.tile_um * self.tile_um;
         let total = self.totals[node];
-        if !(total > 0.0) {
-            // An empty node's alias table is the uniform law.
-            return self.tile_um * self.tile_um / cells as f64;
+        if total > 0.0 {
+            [area / total, 0.0]
+        } else {
+            [0.0, area / (self.tile * self.tile) as f64]
         }
-        self.values[node * cells + cell] as f64 / total * self.tile_um * self.tile_um
     }
 }
 
