@@ -17,6 +17,9 @@
 #                 scenes/heightmaps/*.npy (scripts/make_heightmaps.py, seconds)
 #   make guide    the pictures of docs/guide.md: docs/img/guide/*.png
 #                 (scripts/render_guide.py, about a minute on two cores)
+#   make explore  the live material explorer in the browser: serves it on
+#                 127.0.0.1:8765 and opens it (python -m stam_diffraction.explore,
+#                 docs/explorer.md; EXPLORE_ARGS, e.g. --no-browser)
 #   make wheel    the pip-installable package stam-diffraction: dist/*.whl
 #                 (pyproject.toml; its CMakeLists.txt runs `make plugin`)
 #   make fuzz     the JSON/ABI fuzzing at depth (30,000 cases per strategy)
@@ -66,13 +69,17 @@ PLUGIN_LIBS = $(STAM_LIB) -lmitsuba -ldrjit-core -ldrjit-extra -lnanothread -lpt
 export CARGO_TERM_COLOR ?= never
 SHELL := /bin/bash
 
-.PHONY: all demo animation compare guide heightmaps render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress fuzz furnace FORCE
+.PHONY: explore all demo animation compare guide heightmaps render-tool core plugin wheel setup clean-plugin test test-rust test-python lint check bench bench-render stress fuzz furnace FORCE
 all: plugin
 
 demo: setup plugin heightmaps
 	@start=$$(date +%s); \
 	$(PYTHON) scripts/render_gallery.py && \
 	echo "[demo] done: out/gallery/contact_sheet.png (renders $$(( $$(date +%s) - start )) s)"
+
+EXPLORE_ARGS ?=
+explore: setup core heightmaps
+	PYTHONPATH=python $(PYTHON) -m stam_diffraction.explore $(EXPLORE_ARGS)
 
 # The compact disc turning under the strip lights, a lamp swinging over brushed metal.
 ANIM_WORKERS ?= 2

@@ -20,7 +20,9 @@ log() { printf '[setup] %s\n' "$*"; }
 # libllvm19: LLVM for Dr.Jit's llvm_* variants (Debian's LLVM 14/15 are refused
 #            or crash; see docs/mitsuba.md).
 # libclang-dev: bindgen. g++, make: the plugin build.
-PKGS=(libllvm19 libclang-dev g++ make)
+# chromium: the material explorer's tests (headless WebGL2 through SwiftShader;
+#           tests/test_explorer.py, docs/explorer.md).
+PKGS=(libllvm19 libclang-dev g++ make chromium)
 # A Debian python3 needs python3-venv for `python3 -m venv` (ensurepip).
 if ! command -v "$PYTHON" >/dev/null 2>&1; then
     PKGS+=(python3 python3-venv)

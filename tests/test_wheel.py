@@ -31,7 +31,9 @@ import stam_diffraction  # noqa: E402
 REQUIREMENTS = os.path.join(ROOT, 'scripts', 'requirements.txt')
 WHEELHOUSE = os.path.join(ROOT, 'build', 'wheelhouse')
 WHEEL_FILES = {'__init__.py', '__main__.py', '_layout.py', 'core.py', 'include/stam.h',
-               'libstam.so', 'plugins/diffraction.so', 'plugins/diffraction.abi.json'}
+               'libstam.so', 'plugins/diffraction.so', 'plugins/diffraction.abi.json',
+               'explore.py', 'explorer/index.html', 'explorer/program.js',
+               'explorer/explorer.js'}
 WHEEL_MAX_BYTES = 8e6     # the goal is a few MB
 
 SCENE = """\
