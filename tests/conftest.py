@@ -25,6 +25,7 @@ COLD_SECONDS = {
     'test_plugin.py': 70,
     'test_heightmap.py': 40,  # 2026-12-07: 38 s cold (JIT kernels of 3 variants, demo renders)
     'test_textures.py': 48,
+    'test_explorer.py': 100,  # 2026-12-07: 96 s (headless Chromium, SwiftShader compiles)
     'test_plugin_usability.py': 28,
     'test_compare.py': 25,  # 2026-12-05: 39.5 s cold on the AMD, where it was 15.7
     'test_wheel.py': 20,
@@ -52,6 +53,9 @@ SLOW = {
     'test_gradients.py::test_gradient_equals_finite_difference': 24,
     'test_gradients.py::test_gradients_are_finite_and_reverse_equals_forward': 6,
     'test_compare.py::test_jit_eval_equals_native': 15,
+    'test_explorer.py::test_page_renders_what_the_core_evaluates': 70,  # 8 browser loads
+    'test_explorer.py::test_page_xml_and_dict_load_in_mitsuba_as_the_same_material': 14,
+    'test_explorer.py::test_runtime_parameters_move_a_uniform_within_the_drift': 12,
     'test_textures.py::test_map_values_are_differentiable': 14,
     'test_jit.py::test_decoder_reads_every_exported_program': 8,  # compiles a C++ decoder
     'test_jit.py::test_decoder_refuses_malformed_arrays': 6,
