@@ -156,10 +156,13 @@ def mitsuba_props(params, frame):
             props.append((key, 'boolean', value))
         elif isinstance(value, str):
             props.append((key, 'string', value))
-        elif isinstance(value, int):
-            props.append((key, 'integer', value))
-        elif isinstance(value, float):
-            props.append((key, 'float', value))
+        elif isinstance(value, (int, float)):
+            # A key the reference calls an integer is one; JSON's 1 for a
+            # length is a float
+            if key in _integer_keys():
+                props.append((key, 'integer', int(value)))
+            else:
+                props.append((key, 'float', float(value)))
         elif key == 'gradients' and isinstance(value, list):
             props.append((key, 'string', ','.join(value)))
         else:
@@ -170,6 +173,12 @@ def mitsuba_props(params, frame):
     if frame.get('tracks', 'linear') != 'linear':
         props.append(('tracks', 'string', frame['tracks']))
     return props
+
+
+def _integer_keys():
+    ref = core.parameter_reference()
+    docs = ref['material'] + [k for s in ref['surfaces'] for k in s['keys']]
+    return {d['key'] for d in docs if d['integer']}
 
 
 def _number(v):

@@ -227,7 +227,7 @@ function buildControls() {
 function paramChanged(key, live) {
   const built = state.built[key];
   const v = state.params[key];
-  if (built !== undefined && typeof v === 'number' && built.value !== 0) {
+  if (built !== undefined && state.uniforms && typeof v === 'number' && built.value !== 0) {
     state.uniforms[key] = v;
     state.dirty = true;
     if (Math.abs(v / built.value - 1) <= state.contract.max_drift) {
@@ -251,7 +251,7 @@ function showMaterialText() {
   // parameters as they stand now.
   const dict = Object.assign({}, state.material.dict);
   for (const [k, v] of Object.entries(state.params)) {
-    if (typeof v === 'number' && k in dict) dict[k] = v;
+    if (typeof v === 'number') dict[k] = v;
   }
   if (state.frame.twist) dict.twist = +state.frame.twist; else delete dict.twist;
   if (state.frame.tracks && state.frame.tracks !== 'linear') dict.tracks = state.frame.tracks;
@@ -260,9 +260,9 @@ function showMaterialText() {
   const lines = ['<bsdf type="diffraction">'];
   for (const [k, v] of Object.entries(dict)) {
     if (k === 'type') continue;
+    const doc = surfaceKeys(state.surface).find((d) => d.key === k);
     const kind = typeof v === 'string' ? 'string' : typeof v === 'boolean' ? 'boolean'
-      : Number.isInteger(v) && !String(v).includes('.') &&
-        state.material.xml.includes('<integer name="' + k + '"') ? 'integer' : 'float';
+      : doc && doc.integer ? 'integer' : 'float';
     lines.push('    <' + kind + ' name="' + k + '" value="' + v + '"/>');
   }
   lines.push('</bsdf>');
