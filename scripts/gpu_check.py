@@ -10,7 +10,8 @@ Runs, in a cuda_ad_* variant with Dr.Jit's default flags (symbolic loops and
 calls), the checks the issue asks of the JIT path (docs/jit.md):
   accuracy  the plugin's eval / cos against the core through ctypes
             (python/stam_diffraction/core.py) at random and grazing directions,
-            for the materials of tests/materials.json tagged plugin and compare;
+            for the materials of tests/materials.json tagged plugin and compare
+            and the demo's Gaussian height map (`make heightmaps`);
             spectral variants at four fixed wavelengths;
   chi2      Mitsuba's chi-square test of sample against pdf (glossy context) for
             the plugin-chi2 materials at normal (not gratings), oblique and
@@ -91,12 +92,25 @@ def make_si(mi, dr, wi, n):
     return si
 
 
+def accuracy_materials():
+    """The materials of tests/materials.json tagged plugin or compare, and
+    the demo's Gaussian height map where `make heightmaps` wrote it."""
+    import bench_render
+    out = [m for m in stam_materials.load() if {'plugin', 'compare'} & set(m['tags'])]
+    if os.path.exists(bench_render.HEIGHTMAP):
+        out.append({'name': 'heightmap_gaussian_map', 'tags': ['plugin'],
+                    'params': {'surface': 'heightmap', 'file': bench_render.HEIGHTMAP,
+                               'pixel_um': 0.08}})
+    else:
+        print('[gpu_check] accuracy heightmap: skipped, no %s (make heightmaps)'
+              % os.path.relpath(bench_render.HEIGHTMAP, ROOT), flush=True)
+    return out
+
+
 def check_accuracy(mi, dr, n):
     failed = []
     spectral = mi.is_spectral
-    for m in stam_materials.load():
-        if not ({'plugin', 'compare'} & set(m['tags'])):
-            continue
+    for m in accuracy_materials():
         params = m['params']
         bsdf = mi.load_dict({'type': 'diffraction', **stam_materials.plugin_params(m['params'])})
         wi, wo = directions(n, 1), directions(n, 2)
@@ -222,12 +236,15 @@ def check_speed(mi, dr, scenes, spp, repeats):
 
 def bench_scenes(mi, spp):
     """scripts/bench_render.py's scene (a sphere filling 66% of the frame) with
-    roughconductor and three of the plugin's materials."""
+    roughconductor and three of the plugin's materials (four with the height
+    map, where `make heightmaps` wrote it)."""
     import bench_render
     materials = {'roughconductor': bench_render.MATERIALS['roughconductor (baseline)'],
                  'gaussian': bench_render.MATERIALS['diffraction gaussian (rough)'],
                  'fractal': bench_render.MATERIALS['diffraction fractal'],
                  'cd': bench_render.MATERIALS['diffraction cd']}
+    if os.path.exists(bench_render.HEIGHTMAP):
+        materials['heightmap'] = bench_render.MATERIALS['diffraction heightmap (gaussian map)']
     return {k: bench_render.scene(mi, b, 256, spp) for k, b in materials.items()}
 
 

@@ -44,6 +44,9 @@ run() {
     export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
     export DRJIT_CACHE_DIR=${DRJIT_CACHE_DIR:-/tmp/drjit-cache}
     local status=0 v
+    # The height-map case's map (numpy only; seconds)
+    [ -e scenes/heightmaps/gaussian.npy ] ||
+        python3 scripts/make_heightmaps.py --out scenes/heightmaps > /dev/null || true
     for v in cuda_ad_rgb cuda_ad_spectral; do
         python3 scripts/gpu_check.py --variant $v "$@" > "$out/$v.log" 2>&1 || status=1
         grep -E '^\[gpu_check\]|Error|Traceback' "$out/$v.log" || true
