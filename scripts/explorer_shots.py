@@ -8,6 +8,11 @@ view's time for one whole picture at the size asked for. Those times are a
 software renderer's on this machine's CPU, not a GPU's.
 
     .venv/bin/python scripts/explorer_shots.py [--res 256] [--strips 3] [--out docs/img/explorer]
+        [--models cd,periodic] [--mode spectral]
+
+Spectral pictures are the mean of 8 frames (the page's wavelengths shifted
+within their bins, as it does while it is left to converge); the times are
+one frame's.
 """
 
 import argparse
@@ -39,7 +44,7 @@ def srgb(x):
 def shoot(server, name, params, frame, res, strips, mode='rgb'):
     query = {'material': json.dumps(params), 'frame': json.dumps(frame), 'views': ','.join(VIEWS),
              'view': VIEWS[0], 'mode': mode, 'res': res, 'strips': strips, 'test': name,
-             'wavelengths': 16}
+             'wavelengths': 16, 'frames': 8}
     proc = subprocess.Popen(CHROMIUM + (server.url + '?' + urllib.parse.urlencode(query),),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)

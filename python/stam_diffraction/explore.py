@@ -94,10 +94,21 @@ def _max_drift():
     raise RuntimeError('stam_diffraction.explore: no STAM_PROGRAM_MAX_DRIFT in %s' % core.HEADER)
 
 
-def reference():
-    """The parameter reference of the core, the frame keys and the presets."""
+def height_maps(root):
+    """The height maps under root/scenes/heightmaps (`make heightmaps`), as
+    the page offers them: paths relative to root."""
+    folder = os.path.join(root, 'scenes', 'heightmaps')
+    if not os.path.isdir(folder):
+        return []
+    return sorted(os.path.relpath(os.path.join(folder, f), root) for f in os.listdir(folder)
+                  if f.endswith(('.npy', '.exr', '.csv')))
+
+
+def reference(root='.'):
+    """The parameter reference of the core, the frame keys, the presets and
+    the height maps found under root."""
     return {'core': core.parameter_reference(), 'frame': FRAME_KEYS, 'presets': PRESETS,
-            'preset_frames': PRESET_FRAMES}
+            'preset_frames': PRESET_FRAMES, 'height_maps': height_maps(root)}
 
 
 def spectral_weights(n):
@@ -234,6 +245,13 @@ def build_material(params, mode='rgb', wavelengths=16, frame=None, root='.'):
         lam, w = spectral_weights(n)
         out['wavelengths_nm'] = lam.tolist()
         out['rgb_weights'] = w.tolist()
+        # The weights' density per nm (1 nm steps), for frames whose
+        # wavelengths shift within their bins: the same normalisation
+        lo, hi = WAVELENGTHS_NM
+        fine, wf = spectral_weights(int(hi - lo))
+        out['band_nm'] = [lo, hi]
+        out['density_from_nm'] = float(fine[0])
+        out['rgb_density'] = (wf / (fine[1] - fine[0])).tolist()
     return out
 
 
@@ -301,7 +319,7 @@ class Explorer:
                 elif path == '/api/contract':
                     self._send(200, contract())
                 elif path == '/api/reference':
-                    self._send(200, reference())
+                    self._send(200, reference(explorer.root))
                 elif path == '/api/result':
                     self._send(200, explorer.results)
                 else:

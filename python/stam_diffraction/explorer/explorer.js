@@ -11,7 +11,8 @@
 // wavelengths=N, res=N, light=azimuth,elevation (degrees), strips=N (samples
 // per strip, 0: off), test=<name> (render once to a float framebuffer, read
 // it back and post it to /api/result under <name>), set=key:value,... (a
-// test: move run-time parameters within the drift before reading back).
+// test: move run-time parameters within the drift before reading back),
+// frames=N (spectral: the mean of N frames, their wavelengths shifted).
 
 'use strict';
 
@@ -33,7 +34,7 @@ const state = {
   mode: q.get('mode') || 'rgb', wavelengths: +(q.get('wavelengths') || 16),
   view: q.get('view') || 'disc', azimuth: null, elevation: null, exposure: 1.0,
   strips: q.has('strips') ? +q.get('strips') : 3, res: +(q.get('res') || 512),
-  material: null, gl: null, shader: null, built: {}, frames: 0, fpsAt: 0, dirty: true,
+  material: null, gl: null, shader: null, built: {}, accumulated: 0, dirty: true,
   test: q.get('test'),
 };
 // The light: the query's, else the view's own.
@@ -133,9 +134,16 @@ function controlRow(doc, value, onChange) {
     input.value = value === undefined ? '' : value;
     input.onchange = () => onChange(input.value === '' ? undefined : input.value);
   } else if (doc.key === 'file') {
+    // A path the server opens (relative to its folder); the maps it found
+    // under scenes/heightmaps are offered.
     input = document.createElement('input');
     input.type = 'text';
     input.value = value || '';
+    const list = document.createElement('datalist');
+    list.id = 'height-maps';
+    (state.reference.height_maps || []).forEach((f) => list.appendChild(new Option(f, f)));
+    input.setAttribute('list', list.id);
+    row.appendChild(list);
     input.onchange = () => onChange(input.value || undefined);
   } else {
     input = document.createElement('input');
@@ -502,7 +510,7 @@ function compile() {
   // The first pass compiles the shader for the GPU (SwiftShader: here).
   ensureTarget();
   gl.bindFramebuffer(gl.FRAMEBUFFER, state.target.fb);
-  drawPass(passes()[0], 1);
+  drawPass(passes(0)[0], 1);
   gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.FLOAT, new Float32Array(4));
   gl.bindFramebuffer(gl.FRAMEBUFFER, null);
   state.compileMs = performance.now() - started;
@@ -559,11 +567,36 @@ function lightPosition() {
 
 // The passes of one picture: per wavelength (spectral) the small light, the
 // strip lights' samples along their centre lines and the mirror lobe.
-function passes() {
+// Spectral mode: frame 0 takes the server's wavelengths (the midpoints of
+// N equal bins) and weights; each later frame shifts them within their bins
+// (a golden-ratio sequence) with weights from the server's 1 nm table of the
+// weights' density (each frame normalised to white), and the frames average: the picture converges to the
+// integral over wavelength, so that orders narrower than a bin fill in.
+function wavelengths(frame) {
   const m = state.material;
-  const waves = m.mode === 'spectral'
-    ? m.wavelengths_nm.map((l, j) => ({lambda: l, weight: m.rgb_weights[j]}))
-    : [{lambda: 0, weight: [1, 1, 1]}];
+  if (frame === 0) return m.wavelengths_nm.map((l, j) => ({lambda: l, weight: m.rgb_weights[j]}));
+  const [lo, hi] = m.band_nm, n = m.wavelengths_nm.length, step = (hi - lo) / n;
+  const shift = (0.5 + frame * 0.6180339887) % 1;
+  const d = m.rgb_density, d0 = m.density_from_nm;
+  const waves = Array.from({length: n}, (_, j) => {
+    const lambda = lo + (j + shift) * step;
+    const x = Math.min(Math.max(lambda - d0, 0), d.length - 1.000001);
+    const i = Math.floor(x), t = x - i;
+    return {lambda, weight: [0, 1, 2].map((c) => d[i][c] + (d[i + 1][c] - d[i][c]) * t)};
+  });
+  // Each frame white-balanced, as the server's midpoints are (a reflectance
+  // of 1 gives (1, 1, 1)): a frame's few samples of the observer would
+  // otherwise tint it by 10-15% at 8 wavelengths.
+  for (let c = 0; c < 3; c++) {
+    const sum = waves.reduce((a, w) => a + w.weight[c], 0);
+    waves.forEach((w) => { w.weight[c] /= sum; });
+  }
+  return waves;
+}
+
+function passes(frame) {
+  const m = state.material;
+  const waves = m.mode === 'spectral' ? wavelengths(frame || 0) : [{lambda: 0, weight: [1, 1, 1]}];
   const out = [];
   const K = state.strips;
   for (const w of waves) {
@@ -636,6 +669,8 @@ function ensureTarget() {
 // Rows of pixels a draw covers: a pass is drawn in bands, so that software
 // WebGL (seconds per pass at 512 px) never holds the page for long.
 const BAND_ROWS = 64;
+// Spectral frames averaged (each with its wavelengths shifted in their bins).
+const SPECTRAL_FRAMES = 32;
 
 // Adds the next bands of passes into the framebuffer: as many as fit in
 // about 30 ms (all: every one), then returns.
@@ -645,8 +680,10 @@ function renderSome(all) {
   gl.bindFramebuffer(gl.FRAMEBUFFER, state.target.fb);
   const bands = Math.ceil(state.res / BAND_ROWS);
   if (state.next === 0) {
-    gl.clearColor(0, 0, 0, 0);
-    gl.clear(gl.COLOR_BUFFER_BIT);
+    if (!state.accumulated) {
+      gl.clearColor(0, 0, 0, 0);
+      gl.clear(gl.COLOR_BUFFER_BIT);
+    }
     state.frameStarted = performance.now();
   }
   gl.enable(gl.BLEND);
@@ -682,7 +719,9 @@ function display() {
   gl.activeTexture(gl.TEXTURE1);
   gl.bindTexture(gl.TEXTURE_2D, state.target.tex);
   gl.uniform1i(gl.getUniformLocation(state.displayProg, 'u_sum'), 1);
-  gl.uniform1f(gl.getUniformLocation(state.displayProg, 'u_exposure'), state.exposure);
+  // The mean of the frames added so far
+  gl.uniform1f(gl.getUniformLocation(state.displayProg, 'u_exposure'),
+               state.exposure / (state.accumulated + (state.passList.done ? 1 : 0) || 1));
   gl.drawArrays(gl.TRIANGLES, 0, 3);
 }
 
@@ -694,12 +733,21 @@ function loop() {
   if (state.shader && !state.test) {
     if (state.dirty) {
       state.dirty = false;
-      state.passList = passes();
+      state.accumulated = 0;
+      state.passList = passes(0);
+      state.next = 0;
+    } else if (state.passList && state.passList.done && state.shader.spectral &&
+               state.accumulated + 1 < SPECTRAL_FRAMES) {
+      // The next spectral frame, added to the ones before
+      state.accumulated++;
+      state.passList = passes(state.accumulated);
       state.next = 0;
     }
     if (state.passList && !state.passList.done) {
+      // (display() divides the sum by the frames it holds: those done, and
+      // the one under way counts once it is)
       state.passList.done = renderSome(false);
-      display();
+      if (state.passList.done || !state.accumulated) display();
       if (state.passList.done) setStatus(statusLine());
     }
   }
@@ -737,11 +785,14 @@ function runTest() {
   const out = {width: n, height: n, compile_ms: state.compileMs, ops: state.shader.ops,
                renderer: state.renderer, moved: state.moved, uniforms: state.uniforms, source: q.has('source') ? state.source : undefined,
                xml: $('xml').textContent, dict: $('dict').textContent};
-  const read = () => {
+  const read = (scale) => {
     const px = new Float32Array(4 * n * n);
     gl.readPixels(0, 0, n, n, gl.RGBA, gl.FLOAT, px);
+    if (scale) px.forEach((x, i) => { px[i] = x * scale; });
     return b64(px);
   };
+  // frames=N: the mean of N spectral frames (their wavelengths shifted)
+  const frames = state.shader.spectral ? Math.max(1, +(q.get('frames') || 1)) : 1;
   ensureTarget();
   out.views = {};
   for (const view of (q.get('views') || state.view).split(',')) {
@@ -750,14 +801,19 @@ function runTest() {
     const v = {light: [state.azimuth, state.elevation]};
     for (const [name, mode] of [['wi', 1], ['wo', 2], ['factor', 3]]) {
       gl.bindFramebuffer(gl.FRAMEBUFFER, state.target.fb);
-      drawPass(passes()[0], true, mode);
+      drawPass(passes(0)[0], true, mode);
       v[name] = read();
     }
-    state.passList = passes();
-    state.next = 0;
-    renderSome(true);
+    const t0 = performance.now();
+    for (let f = 0; f < frames; f++) {
+      state.accumulated = f;
+      state.passList = passes(f);
+      state.next = 0;
+      renderSome(true);
+    }
     gl.bindFramebuffer(gl.FRAMEBUFFER, state.target.fb);
-    v.radiance = read();
+    v.radiance = read(1 / frames);
+    state.frameStarted = t0 + (performance.now() - t0) * (1 - 1 / frames);
     v.frame_ms = performance.now() - state.frameStarted;
     v.passes = state.passList.length;
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
