@@ -487,12 +487,7 @@ function compile() {
     gl.deleteTexture(state.shader.tex);
   }
   // The tables, one R32F texture.
-  const tex = gl.createTexture();
-  gl.activeTexture(gl.TEXTURE0);
-  gl.bindTexture(gl.TEXTURE_2D, tex);
-  gl.texImage2D(gl.TEXTURE_2D, 0, gl.R32F, g.width, g.height, 0, gl.RED, gl.FLOAT, g.tables);
-  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
-  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  const tex = floatTexture(gl, 0, gl.R32F, gl.RED, g.width, g.height, g.tables);
   const locs = {};
   const loc = (name) => (name in locs ? locs[name] : (locs[name] = gl.getUniformLocation(prog, name)));
   state.shader = {prog, tex, loc, params: g.params, spectral,
@@ -643,6 +638,17 @@ function drawPass(pass, first, output) {
   gl.drawArrays(gl.TRIANGLES, 0, 3);
 }
 
+// A float texture on texture unit `unit`, read texel by texel.
+function floatTexture(gl, unit, internal, format, width, height, data) {
+  const tex = gl.createTexture();
+  gl.activeTexture(gl.TEXTURE0 + unit);
+  gl.bindTexture(gl.TEXTURE_2D, tex);
+  gl.texImage2D(gl.TEXTURE_2D, 0, internal, width, height, 0, format, gl.FLOAT, data);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  return tex;
+}
+
 // The float framebuffer the passes add into.
 function ensureTarget() {
   const gl = state.gl, n = state.res;
@@ -651,12 +657,7 @@ function ensureTarget() {
     gl.deleteFramebuffer(state.target.fb);
     gl.deleteTexture(state.target.tex);
   }
-  const tex = gl.createTexture();
-  gl.activeTexture(gl.TEXTURE1);
-  gl.bindTexture(gl.TEXTURE_2D, tex);
-  gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, n, n, 0, gl.RGBA, gl.FLOAT, null);
-  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
-  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+  const tex = floatTexture(gl, 1, gl.RGBA32F, gl.RGBA, n, n, null);
   const fb = gl.createFramebuffer();
   gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
   gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, tex, 0);
