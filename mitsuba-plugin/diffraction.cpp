@@ -180,8 +180,8 @@ Diffraction BSDF (:monosp:`diffraction`)
    - |exposed|
  * - file
    - |string|
-   - Height maps: the map, a ``.npy`` array, an OpenEXR ``.exr`` image or a
-     ``.csv`` table of heights
+   - Height maps: the map, a ``.npy`` array, an OpenEXR ``.exr``, TIFF
+     ``.tif`` or gray PNG ``.png`` image or a ``.csv`` table of heights
      (one channel, rows along y, 16 to 4096 samples each way), found as a
      bitmap's ``filename`` is (against the scene's folder and Mitsuba's
      search path). (Default: none, required)

@@ -101,7 +101,7 @@ def height_maps(root):
     if not os.path.isdir(folder):
         return []
     return sorted(os.path.relpath(os.path.join(folder, f), root) for f in os.listdir(folder)
-                  if f.endswith(('.npy', '.exr', '.csv')))
+                  if f.endswith(('.npy', '.exr', '.tif', '.tiff', '.png', '.csv')))
 
 
 def reference(root='.'):

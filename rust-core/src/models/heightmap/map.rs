@@ -1,7 +1,8 @@
 //! Reading a height map: NumPy's .npy (the format of scientific Python and
 //! of most AFM/profilometer exporters' scripts), OpenEXR (Mitsuba's and
-//! the renderers' image format, through the `exr` crate) and plain CSV,
-//! then the
+//! the renderers' image format, through the `exr` crate), TIFF (floats or
+//! integers: Gwyddion's and profilometers' export; the `tiff` crate), 16-
+//! or 8-bit gray PNG (the `png` crate) and plain CSV, then the
 //! heights detrended (mean and tilt removed: a tilted sample is a tilted
 //! mirror, not a rougher surface).
 //!
@@ -108,12 +109,100 @@ pub fn read_map(path: &str) -> Result<(usize, usize, Vec<f64>), StamError> {
         read_csv(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
     } else if lower.ends_with(".exr") {
         read_exr(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+    } else if lower.ends_with(".png") {
+        read_png(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+    } else if lower.ends_with(".tif") || lower.ends_with(".tiff") {
+        read_tiff(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
     } else {
         Err(StamError::new(format!(
-            "parameter 'file' = '{path}': accepted formats are .npy, .exr and .csv (a TIFF or \
-             PNG map converts with numpy: np.save('map.npy', imageio.imread('map.tif')))"
+            "parameter 'file' = '{path}': accepted formats are .npy, .exr, .tif/.tiff, .png and \
+             .csv (another image converts with numpy: np.save('map.npy', imageio.imread(...)))"
         )))
     }
+}
+
+/// A PNG image's gray values (8 or 16 bits; an alpha channel is ignored),
+/// as integers: `height_scale_um` gives micrometres per unit, as profilometers
+/// export 16-bit maps.
+fn read_png(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
+    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    // 16-bit samples kept as they are; palettes and low bit depths expanded
+    decoder.set_transformations(png::Transformations::EXPAND);
+    let mut reader = decoder
+        .read_info()
+        .map_err(|e| format!("not a readable PNG image ({e})"))?;
+    let size = reader
+        .output_buffer_size()
+        .ok_or("the PNG image is too large")?;
+    let mut buf = vec![0u8; size];
+    let info = reader
+        .next_frame(&mut buf)
+        .map_err(|e| format!("not a readable PNG image ({e})"))?;
+    let channels = match info.color_type {
+        png::ColorType::Grayscale => 1,
+        png::ColorType::GrayscaleAlpha => 2,
+        other => {
+            return Err(format!(
+                "a height map is one channel of gray, not a PNG of colour type {other:?}"
+            ))
+        }
+    };
+    let (nx, ny) = (info.width as usize, info.height as usize);
+    let bytes_per = if info.bit_depth == png::BitDepth::Sixteen {
+        2
+    } else {
+        1
+    };
+    let line = info.line_size;
+    let mut values = Vec::with_capacity(nx * ny);
+    for row in buf[..line * ny].chunks(line) {
+        for px in row[..nx * channels * bytes_per].chunks(channels * bytes_per) {
+            values.push(if bytes_per == 2 {
+                u16::from_be_bytes([px[0], px[1]]) as f64
+            } else {
+                px[0] as f64
+            });
+        }
+    }
+    Ok((nx, ny, values))
+}
+
+/// A TIFF image's first page: one channel of gray (an alpha channel is
+/// ignored) in any sample type (floats as profilometers and Gwyddion write
+/// them; integers scaled by `height_scale_um`), uncompressed, LZW or
+/// Deflate.
+fn read_tiff(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
+    use tiff::decoder::{Decoder, DecodingResult};
+    let bad = |e: tiff::TiffError| format!("not a readable TIFF image ({e})");
+    let mut decoder = Decoder::new(std::io::Cursor::new(bytes)).map_err(bad)?;
+    let (nx, ny) = decoder.dimensions().map_err(bad)?;
+    let channels = match decoder.colortype().map_err(bad)? {
+        tiff::ColorType::Gray(_) => 1,
+        tiff::ColorType::GrayA(_) => 2,
+        other => {
+            return Err(format!(
+                "a height map is one channel of gray, not a TIFF of colour type {other:?}"
+            ))
+        }
+    };
+    let all: Vec<f64> = match decoder.read_image().map_err(bad)? {
+        DecodingResult::U8(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::U64(v) => v.into_iter().map(|x| x as f64).collect(),
+        DecodingResult::F16(v) => v.into_iter().map(|x| x.to_f64()).collect(),
+        DecodingResult::F32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::F64(v) => v,
+        DecodingResult::I8(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I16(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I32(v) => v.into_iter().map(f64::from).collect(),
+        DecodingResult::I64(v) => v.into_iter().map(|x| x as f64).collect(),
+    };
+    let (nx, ny) = (nx as usize, ny as usize);
+    if all.len() != nx * ny * channels {
+        return Err(format!("{} samples for {nx} x {ny} pixels", all.len()));
+    }
+    Ok((nx, ny, all.into_iter().step_by(channels).collect()))
 }
 
 /// A .npy file's 2-D array.

@@ -2,7 +2,7 @@
 //! (docs/heightmap.md), Stam's general result on the map itself rather
 //! than on a statistical model of it.
 //!
-//! The map (`map.rs`: .npy, .exr or .csv, detrended) gives two tables
+//! The map (`map.rs`: .npy, .exr, .tif, .png or .csv, detrended) gives two tables
 //! (`welch.rs`): the coherent lobe's |chi(kappa)|^2 and the diffuse
 //! spectrum T(kappa, nu), with kappa = k |w| and nu = (u, v) / lambda:
 //!

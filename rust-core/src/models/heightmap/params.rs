@@ -26,7 +26,7 @@ pub const DEFAULT_HEIGHT_SCALE_UM: f64 = 1.0;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct HeightMapParams {
-    /// The map's file (.npy, .exr or .csv), as the host resolved it.
+    /// The map's file (.npy, .exr, .tif, .png or .csv), as the host resolved it.
     pub file: String,
     pub pixel_um: f64,
     pub height_scale_um: f64,
@@ -57,8 +57,9 @@ impl crate::models::ModelParams for HeightMapParams {
             KeyDoc::text(
                 "file",
                 "the height map: a .npy array (float or integer, rows along y), an OpenEXR \
-                 image (its one channel, or Y, or R) or a .csv table of numbers, one row of \
-                 the map per line",
+                 image (its one channel, or Y, or R), a gray TIFF (floats or integers) or \
+                 PNG (8 or 16 bits) image, or a .csv table of numbers, one row of the map \
+                 per line",
                 "a path".into(),
             )
             .required(),
@@ -113,7 +114,7 @@ impl crate::models::ModelParams for HeightMapParams {
         ])?;
         let file = r.string("file")?.ok_or_else(|| {
             StamError::new(
-                "missing parameter 'file' for surface 'heightmap' (a .npy, .exr or .csv height map)",
+                "missing parameter 'file' for surface 'heightmap' (a .npy, .exr, .tif, .png or .csv height map)",
             )
         })?;
         let tile_px = r.integer("tile_px", range::TILE_PX)?;

@@ -249,7 +249,7 @@ fn a_blazed_map_reflects_towards_its_facets_mirror() {
 /// The .npy reader: f4, f8, integers, big-endian, Fortran order; CSV;
 /// OpenEXR.
 #[test]
-fn readers_accept_numpy_and_csv() {
+fn readers_accept_numpy_exr_tiff_png_and_csv() {
     use super::map::read_map;
     let (nx, ny) = (20, 17);
     let values: Vec<f64> = (0..nx * ny).map(|i| (i as f64 * 0.37).sin()).collect();
@@ -352,6 +352,66 @@ fn readers_accept_numpy_and_csv() {
             assert!((g - v).abs() <= 1e-7, "{name}: {g} vs {v}");
         }
     }
+    // TIFF: 32-bit floats (uncompressed and LZW), 16-bit integers (Deflate,
+    // heights in nm: 1000 units a micrometre, as height_scale_um reads them).
+    use tiff::encoder::{colortype, Compression, DeflateLevel, TiffEncoder};
+    let nm: Vec<u16> = values
+        .iter()
+        .map(|&v| (v * 1000.0 + 30000.0).round() as u16)
+        .collect();
+    for (name, compression, float) in [
+        ("f32.tif", Compression::Uncompressed, true),
+        ("f32lzw.tiff", Compression::Lzw, true),
+        (
+            "u16.tif",
+            Compression::Deflate(DeflateLevel::Balanced),
+            false,
+        ),
+    ] {
+        let path = dir.join(name);
+        let file = std::fs::File::create(&path).unwrap();
+        let mut tif = TiffEncoder::new(file)
+            .unwrap()
+            .with_compression(compression);
+        if float {
+            tif.write_image::<colortype::Gray32Float>(nx as u32, ny as u32, &f32s)
+                .unwrap();
+        } else {
+            tif.write_image::<colortype::Gray16>(nx as u32, ny as u32, &nm)
+                .unwrap();
+        }
+        drop(tif);
+        let (x, y, got) = read_map(&path.to_string_lossy()).unwrap();
+        assert_eq!((x, y), (nx, ny), "{name}");
+        for (g, v) in got.iter().zip(&values) {
+            let g = if float { *g } else { (g - 30000.0) / 1000.0 };
+            assert!((g - v).abs() <= 5e-4, "{name}: {g} vs {v}");
+        }
+    }
+    // PNG: 16-bit gray, and 8-bit gray with alpha.
+    for (name, sixteen) in [("u16.png", true), ("u8a.png", false)] {
+        let path = dir.join(name);
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut enc = png::Encoder::new(file, nx as u32, ny as u32);
+        let data: Vec<u8> = if sixteen {
+            enc.set_color(png::ColorType::Grayscale);
+            enc.set_depth(png::BitDepth::Sixteen);
+            nm.iter().flat_map(|v| v.to_be_bytes()).collect()
+        } else {
+            enc.set_color(png::ColorType::GrayscaleAlpha);
+            enc.set_depth(png::BitDepth::Eight);
+            nm.iter().flat_map(|&v| [(v % 256) as u8, 255]).collect()
+        };
+        let mut writer = enc.write_header().unwrap();
+        writer.write_image_data(&data).unwrap();
+        writer.finish().unwrap();
+        let (x, y, got) = read_map(&path.to_string_lossy()).unwrap();
+        assert_eq!((x, y), (nx, ny), "{name}");
+        for (g, &v) in got.iter().zip(&nm) {
+            let want = if sixteen { v as f64 } else { (v % 256) as f64 };
+            assert_eq!(*g, want, "{name}");
+        }
+    }
 }
 
 /// Refusals by name: a missing file, an unknown format, a NaN (with its
@@ -383,7 +443,15 @@ fn bad_maps_are_refused_by_name() {
         ),
         (
             map_json(&good.with_extension("tif"), ""),
-            "parameter 'file'",
+            "not a readable TIFF image",
+        ),
+        (
+            map_json(&good.with_extension("png"), ""),
+            "not a readable PNG image",
+        ),
+        (
+            map_json(&good.with_extension("bmp"), ""),
+            "accepted formats are .npy, .exr, .tif/.tiff, .png and .csv",
         ),
         (map_json(&nan, ""), "at row 5, column 7"),
         (map_json(&small, ""), "8 x 8 samples"),
@@ -396,6 +464,8 @@ fn bad_maps_are_refused_by_name() {
     ];
     std::fs::write(good.with_extension("exr"), b"not a map").unwrap();
     std::fs::write(good.with_extension("tif"), b"not a map").unwrap();
+    std::fs::write(good.with_extension("png"), b"not a map").unwrap();
+    std::fs::write(good.with_extension("bmp"), b"BM").unwrap();
     for (json, expected) in cases {
         let message = err(&json);
         assert!(message.contains(expected), "{json}: {message}");
