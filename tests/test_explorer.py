@@ -71,6 +71,20 @@ def render(server, name, params, frame, light=None, mode='rgb', views=VIEWS, ext
     if light:
         query['light'] = light
     query.update(extra or {})
+    result = browse(server, name, query)
+    assert 'error' not in result, result['error']
+
+    def floats(b64, k):
+        a = np.frombuffer(base64.b64decode(b64), dtype='<f4').reshape(RES, RES, 4)
+        return a[..., :k] if k > 1 else a[..., 0]
+    for v in result['views'].values():
+        for key, k in (('wi', 3), ('wo', 3), ('radiance', 3), ('factor', 1)):
+            v[key] = floats(v[key], k)
+    return result
+
+
+def browse(server, name, query):
+    """What the page in test mode posted for `query` (its own browser)."""
     url = server.url + '?' + urllib.parse.urlencode(query)
     proc = subprocess.Popen(CHROMIUM + (url,), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
@@ -80,14 +94,6 @@ def render(server, name, params, frame, light=None, mode='rgb', views=VIEWS, ext
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
     assert result is not None, 'the page posted nothing in 240 s'
-    assert 'error' not in result, result['error']
-
-    def floats(b64, k):
-        a = np.frombuffer(base64.b64decode(b64), dtype='<f4').reshape(RES, RES, 4)
-        return a[..., :k] if k > 1 else a[..., 0]
-    for v in result['views'].values():
-        for key, k in (('wi', 3), ('wo', 3), ('radiance', 3), ('factor', 1)):
-            v[key] = floats(v[key], k)
     return result
 
 
@@ -360,3 +366,39 @@ def test_spectral_frames_converge_to_the_integral_over_wavelength(server):
     print('8 frames of 8 wavelengths against 1 nm steps: %.2e of the peak (one frame: %.2e)'
           % (e_frames, e_one))
     assert e_frames < 0.5 * e_one and e_frames < 5e-3
+
+
+def test_a_rebuild_with_new_numbers_reuses_the_shader(server):
+    """A Gaussian's sigma changed beyond the drift: the core builds the
+    material anew (tables of another size), the page keeps its compiled
+    shader (the code is the same; the tables' places are uniforms) and
+    renders the new material."""
+    params = {'surface': 'gaussian', 'sigma_um': 0.03, 'corr_um': 1.0}
+    new = dict(params, sigma_um=0.05)
+    result = render(server, 'rebuild', params, {}, views=('sphere',),
+                    extra={'rebuild': json.dumps(new)})
+    assert result['reused'] is True
+    v = result['views']['sphere']
+    lit = v['factor'] > 0
+    native, prog = core_references(new, 'rgb', v['wi'][lit].astype(np.float64),
+                                   v['wo'][lit].astype(np.float64), v['factor'][lit])
+    e = relative_error(v['radiance'][lit], prog).max()
+    print('rebuilt sigma 0.03 -> 0.05: shader reused, %.2f s to the new picture (%d px, '
+          'software WebGL), page against the new material\'s programs %.2e'
+          % (result['rebuild_ms'] / 1e3, RES, e))
+    assert e < 1e-3
+    assert relative_error(v['radiance'][lit], native).max() < 1e-2
+
+
+def test_a_bad_value_is_shown_beside_its_control_and_the_picture_stays(server):
+    """The core's message for an out-of-range value stands beside the
+    control it names; the last good material (and its picture) stays."""
+    params = {'surface': 'gaussian', 'sigma_um': 0.03, 'corr_um': 1.0}
+    bad = dict(params, sigma_um=-1.0)
+    query = {'material': json.dumps(params), 'frame': '{}', 'view': 'sphere', 'res': RES,
+             'strips': 0, 'test': 'bad', 'rebuild': json.dumps(bad)}
+    result = browse(server, 'bad', query)
+    assert 'sigma_um' in result['error']
+    assert result['beside'] == 'sigma_um'
+    assert result['kept']['sigma_um'] == pytest.approx(0.03)
+    assert result['canvas_kept'] is True

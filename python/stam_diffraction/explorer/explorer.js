@@ -12,7 +12,9 @@
 // per strip, 0: off), test=<name> (render once to a float framebuffer, read
 // it back and post it to /api/result under <name>), set=key:value,... (a
 // test: move run-time parameters within the drift before reading back),
-// frames=N (spectral: the mean of N frames, their wavelengths shifted).
+// frames=N (spectral: the mean of N frames, their wavelengths shifted),
+// rebuild=<JSON params> (a test: after the first material, time a change
+// to these from the request to the new picture).
 
 'use strict';
 
@@ -34,7 +36,8 @@ const state = {
   mode: q.get('mode') || 'rgb', wavelengths: +(q.get('wavelengths') || 16),
   view: q.get('view') || 'disc', azimuth: null, elevation: null, exposure: 1.0,
   strips: q.has('strips') ? +q.get('strips') : 3, res: +(q.get('res') || 512),
-  material: null, gl: null, shader: null, built: {}, accumulated: 0, dirty: true,
+  material: null, gl: null, shader: null, shaders: new Map(), built: {}, accumulated: 0,
+  dirty: true,
   test: q.get('test'),
 };
 // The light: the query's, else the view's own.
@@ -153,8 +156,18 @@ function controlRow(doc, value, onChange) {
     if (doc.max !== null && doc.max !== undefined) input.max = doc.max;
     input.placeholder = doc.default !== null && doc.default !== undefined ? String(doc.default) : '';
     input.value = value === undefined ? '' : value;
-    input.oninput = () => onChange(input.value === '' ? undefined : +input.value, true);
-    input.onchange = () => onChange(input.value === '' ? undefined : +input.value);
+    const typed = (live) => {
+      // A number the browser cannot read ("nan", "1e"): said beside it
+      if (input.validity.badInput) {
+        row.querySelector('.err').textContent = 'not a number: the material keeps ' +
+          (value === undefined ? 'its default' : value);
+        return;
+      }
+      row.querySelector('.err').textContent = '';
+      onChange(input.value === '' ? undefined : +input.value, live);
+    };
+    input.oninput = () => typed(true);
+    input.onchange = () => typed(false);
     // Dragging: the wheel scales the value by 2% a notch (a program's drift).
     input.onwheel = (e) => {
       if (input.value === '') return;
@@ -173,7 +186,31 @@ function controlRow(doc, value, onChange) {
   unit.className = 'unit';
   unit.textContent = doc.unit || '';
   row.appendChild(unit);
+  // The core's message about this key, beside it
+  const err = document.createElement('div');
+  err.className = 'err';
+  row.appendChild(err);
+  row.dataset.key = doc.key;
   return row;
+}
+
+// Shows `message` beside the control of the key it names (the core's
+// messages name the key: "parameter 'sigma_um' ..."), else in the status
+// line; the picture of the last good material stays.
+function showError(message) {
+  for (const e of document.querySelectorAll('.row .err')) e.textContent = '';
+  const keys = [...message.matchAll(/'([A-Za-z_.]+)'/g)].map((m) => m[1]);
+  for (const key of keys) {
+    const row = document.querySelector('.row[data-key="' + key.split('.')[0] + '"]');
+    if (row) {
+      row.querySelector('.err').textContent = message;
+      state.errorBeside = row.dataset.key;
+      setStatus('not built: ' + key + ' (see beside it); the picture is the last good material\'s',
+                true);
+      return;
+    }
+  }
+  setStatus(message, true);
 }
 
 function buildControls() {
@@ -288,13 +325,19 @@ async function build() {
     const m = await getJson('/api/material', {params: state.params, mode: state.mode,
                                               wavelengths: state.wavelengths, frame: state.frame});
     if (serial !== buildSerial) return;
+    for (const e of document.querySelectorAll('.row .err')) e.textContent = '';
     state.material = m;
     $('warnings').textContent = (m.warnings || []).join(' ');
     showMaterialText();
     compile();
   } catch (e) {
-    if (serial === buildSerial) setStatus(String(e.message || e), true);
-    if (state.test) postResult({error: String(e.message || e)});
+    if (serial === buildSerial) showError(String(e.message || e));
+    // (a test reads where the message stands and which material stays)
+    if (state.test) {
+      postResult({error: String(e.message || e), beside: state.errorBeside || null,
+                  kept: state.material ? state.material.resolved : null,
+                  canvas_kept: !!state.shader});
+    }
   } finally {
     clearInterval(tick);
   }
@@ -474,23 +517,34 @@ function compile() {
   const spectral = m.mode === 'spectral';
   const src = fragmentSource(g.source, spectral, !!progs.coherent);
   state.source = src;
-  let prog;
-  try {
-    prog = glProgram(gl, src);
-  } catch (e) {
-    setStatus(e.message, true);
-    if (state.test) postResult({error: e.message});
-    return;
+  // Shaders by source: a material whose programs differ from one seen
+  // before only in numbers (their tables, their parameters) reuses its
+  // compiled shader, as Dr.Jit reuses its kernels.
+  let cached = state.shaders.get(src);
+  const reused = !!cached;
+  if (!cached) {
+    try {
+      cached = {prog: glProgram(gl, src), locs: {}};
+    } catch (e) {
+      setStatus(e.message, true);
+      if (state.test) postResult({error: e.message});
+      return;
+    }
+    state.shaders.set(src, cached);
+    if (state.shaders.size > SHADER_CACHE) {
+      const [oldest, old] = state.shaders.entries().next().value;
+      if (!state.shader || old.prog !== state.shader.prog) {
+        gl.deleteProgram(old.prog);
+        state.shaders.delete(oldest);
+      }
+    }
   }
-  if (state.shader) {
-    gl.deleteProgram(state.shader.prog);
-    gl.deleteTexture(state.shader.tex);
-  }
+  if (state.shader) gl.deleteTexture(state.shader.tex);
+  const prog = cached.prog, locs = cached.locs;
   // The tables, one R32F texture.
   const tex = floatTexture(gl, 0, gl.R32F, gl.RED, g.width, g.height, g.tables);
-  const locs = {};
   const loc = (name) => (name in locs ? locs[name] : (locs[name] = gl.getUniformLocation(prog, name)));
-  state.shader = {prog, tex, loc, params: g.params, spectral,
+  state.shader = {prog, tex, loc, params: g.params, spectral, reused, directories: g.directories,
                   ops: named.reduce((a, [, p]) => a + p.code.length, 0),
                   tableBytes: 4 * g.tables.length};
   // What the programs were built with; a drifted parameter's uniform.
@@ -511,6 +565,23 @@ function compile() {
   state.compileMs = performance.now() - started;
   restart();
   setStatus(statusLine());
+  if (state.test && q.has('rebuild') && !state.rebuildStarted) {
+    // rebuild=<JSON params>: a change that needs the core, timed from the
+    // request to the new picture on the canvas (build, shader, one picture)
+    state.rebuildStarted = performance.now();
+    state.params = JSON.parse(q.get('rebuild'));
+    build();
+    return;
+  }
+  if (state.test && state.rebuildStarted && state.rebuildMs === undefined) {
+    state.accumulated = 0;
+    state.passList = passes(0);
+    state.next = 0;
+    renderSome(true);
+    display();
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+    state.rebuildMs = performance.now() - state.rebuildStarted;
+  }
   if (state.test) {
     // set=key:value,...: move parameters as a control would before reading
     // back (a test of the run-time path: within the drift, a uniform).
@@ -536,6 +607,7 @@ function statusLine() {
   return state.material.mode + ' programs: ' + s.ops + ' operations, ' +
     (s.tableBytes / 1e6).toFixed(1) + ' MB of tables; core build ' +
     state.material.build_s.toFixed(2) + ' s, shader ' + (state.compileMs / 1000).toFixed(1) + ' s' +
+    (s.reused ? ' (compiled before)' : '') +
     (state.frameMs ? '; ' + (1000 / state.frameMs).toFixed(1) + ' frames/s (' +
      state.passCount + ' passes; ' + (state.renderer || 'this browser\'s WebGL') + ')' : '');
 }
@@ -633,6 +705,7 @@ function drawPass(pass, first, output) {
   gl.uniform1i(s.loc('u_output'), output || 0);
   gl.uniform1i(s.loc('u_tables'), 0);
   for (const k of s.params) gl.uniform1f(s.loc('p_' + k), state.uniforms[k]);
+  for (const [name, dir] of Object.entries(s.directories)) gl.uniform2iv(s.loc(name + '_tab'), dir);
   gl.activeTexture(gl.TEXTURE0);
   gl.bindTexture(gl.TEXTURE_2D, s.tex);
   gl.drawArrays(gl.TRIANGLES, 0, 3);
@@ -670,6 +743,8 @@ function ensureTarget() {
 // Rows of pixels a draw covers: a pass is drawn in bands, so that software
 // WebGL (seconds per pass at 512 px) never holds the page for long.
 const BAND_ROWS = 64;
+// Compiled shaders kept (by source).
+const SHADER_CACHE = 8;
 // Spectral frames averaged (each with its wavelengths shifted in their bins).
 const SPECTRAL_FRAMES = 32;
 
@@ -784,7 +859,8 @@ function b64(floats) {
 function runTest() {
   const gl = state.gl, n = state.res;
   const out = {width: n, height: n, compile_ms: state.compileMs, ops: state.shader.ops,
-               renderer: state.renderer, moved: state.moved, uniforms: state.uniforms, source: q.has('source') ? state.source : undefined,
+               renderer: state.renderer, moved: state.moved, rebuild_ms: state.rebuildMs,
+               reused: state.shader.reused, build_s: state.material.build_s, uniforms: state.uniforms, source: q.has('source') ? state.source : undefined,
                xml: $('xml').textContent, dict: $('dict').textContent};
   const read = (scale) => {
     const px = new Float32Array(4 * n * n);

@@ -9,7 +9,10 @@
 //     it defines reads 0 elsewhere (registers read after their region are
 //     declared before it, as 0);
 //   - Gather: table a at float index b, clamped into the table, NaN to 0,
-//     truncated; the tables are packed into one R32F texture;
+//     truncated; the tables are packed into one R32F texture, where each
+//     starts and how long it is a uniform (<name>_tab[a]: start, length),
+//     so that materials whose programs differ only in their tables' values
+//     and sizes share one compiled shader;
 //   - Param: the parameter in slot a, a uniform named after the parameter
 //     (p_<name>), so that the page moves it without building anything.
 // The contract (op codes, the header's length and format, parameter names)
@@ -63,10 +66,11 @@ function glslConst(x) {
   return 'uintBitsToFloat(0x' + bits.toString(16).padStart(8, '0') + 'u)';
 }
 
-// GLSL source of `float name(...)`-style function for a decoded program:
-// `void name(in float x[N], out float y[M])`, reading its tables from
-// `sampler` starting at texel `tableBase`. Returns {source, tables (the
-// packed values, a Float32Array), params (the names it reads)}.
+// GLSL source of a decoded program as `void name(in float x[N], out float
+// y[M])`, reading its tables from `sampler` at the places the uniform
+// `name_tab` gives. Returns {source, directory (start, length per table,
+// from texel `tableBase`), tables (the packed values, a Float32Array),
+// params (the names it reads)}.
 function programGlsl(prog, name, sampler, tableBase, contract) {
   const op = contract.ops;
   const code = prog.code;
@@ -120,12 +124,13 @@ function programGlsl(prog, name, sampler, tableBase, contract) {
     if (region[r] >= 0) hoist[r] = 1;
   }
   // Tables: packed one after another.
-  const offsets = [];
+  const directory = new Int32Array(2 * Math.max(prog.tables.length, 1));
   let total = 0;
-  for (const t of prog.tables) {
-    offsets.push(tableBase + total);
+  prog.tables.forEach((t, k) => {
+    directory[2 * k] = tableBase + total;
+    directory[2 * k + 1] = t.length;
     total += t.length;
-  }
+  });
   const packed = new Float32Array(total);
   let at = 0;
   for (const t of prog.tables) {
@@ -182,8 +187,7 @@ function programGlsl(prog, name, sampler, tableBase, contract) {
     else if (o === op.Not) e = flag('!' + mask(a));
     else if (o === op.Select) e = mask(a) + ' ? ' + r(b) + ' : ' + r(c);
     else if (o === op.Gather) {
-      e = 'stam_gather(' + sampler + ', ' + offsets[a] + ', ' + prog.tables[a].length + ', ' +
-          r(b) + ')';
+      e = 'stam_gather(' + sampler + ', ' + name + '_tab[' + a + '], ' + r(b) + ')';
     } else {
       throw new Error('unknown operation code ' + o + ' at instruction ' + i);
     }
@@ -195,15 +199,16 @@ function programGlsl(prog, name, sampler, tableBase, contract) {
   }
   prog.outputs.forEach((reg, k) => lines.push('  y[' + k + '] = ' + r(reg) + ';'));
   lines.push('}');
-  return {source: lines.join('\n'), tables: packed, params: Array.from(params)};
+  const decl = 'uniform ivec2 ' + name + '_tab[' + Math.max(prog.tables.length, 1) + '];\n';
+  return {source: decl + lines.join('\n'), directory, tables: packed, params: Array.from(params)};
 }
 
 // The helpers every translated program calls (the Gather and Atan2
 // semantics of stam.h), once per shader.
 const PROGRAM_PRELUDE = `
-float stam_gather(highp sampler2D t, int offset, int len, float x) {
-  int i = isnan(x) ? 0 : int(clamp(x, 0.0, float(len - 1)));
-  int k = offset + i;
+float stam_gather(highp sampler2D t, ivec2 table, float x) {
+  int i = isnan(x) ? 0 : int(clamp(x, 0.0, float(table.y - 1)));
+  int k = table.x + i;
   return texelFetch(t, ivec2(k % ${TABLE_TEXTURE_WIDTH}, k / ${TABLE_TEXTURE_WIDTH}), 0).r;
 }
 // The angle of (b, a) (atan2(a, b)); GLSL leaves atan(0, 0) undefined.
@@ -214,18 +219,21 @@ float stam_atan2(float a, float b) {
 `;
 
 // Several programs' GLSL over one table texture: {source (prelude, the
-// parameters' uniforms, each function), tables (Float32Array, padded to
-// whole rows), width, height, params (names)}. `named`: [[glslName,
-// decodedProgram], ...].
+// parameters' uniforms, each function), directories ({glslName: the values
+// of its _tab uniform}), tables (Float32Array, padded to whole rows),
+// width, height, params (names)}. `named`: [[glslName, decodedProgram],
+// ...].
 function programsGlsl(named, sampler, contract) {
   const parts = [];
   const tableParts = [];
+  const directories = {};
   const params = new Set();
   let base = 0;
   for (const [name, prog] of named) {
     const g = programGlsl(prog, name, sampler, base, contract);
     parts.push(g.source);
     tableParts.push(g.tables);
+    directories[name] = g.directory;
     base += g.tables.length;
     g.params.forEach((p) => params.add(p));
   }
@@ -238,8 +246,8 @@ function programsGlsl(named, sampler, contract) {
     at += t.length;
   }
   const uniforms = Array.from(params).map((p) => 'uniform float p_' + p + ';').join('\n');
-  return {source: PROGRAM_PRELUDE + uniforms + '\n' + parts.join('\n'), tables, width, height,
-          params: Array.from(params)};
+  return {source: PROGRAM_PRELUDE + uniforms + '\n' + parts.join('\n'), directories, tables,
+          width, height, params: Array.from(params)};
 }
 
 if (typeof module !== 'undefined') {
