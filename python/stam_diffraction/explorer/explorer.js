@@ -322,6 +322,7 @@ async function build() {
   const tick = setInterval(() => setStatus('building the material\'s tables and programs in the core... ' +
     ((performance.now() - started) / 1000).toFixed(1) + ' s'), 250);
   try {
+    state.timing = {requested: performance.now()};
     const m = await getJson('/api/material', {params: state.params, mode: state.mode,
                                               wavelengths: state.wavelengths, frame: state.frame});
     if (serial !== buildSerial) return;
@@ -501,6 +502,7 @@ function compile() {
   if (!m) return;
   const gl = state.gl;
   const started = performance.now();
+  if (state.timing) state.timing.received = started;
   const named = [];
   const progs = {};
   for (const [name, b64] of Object.entries(m.programs)) {
@@ -513,7 +515,9 @@ function compile() {
     setStatus('this material has no ' + m.mode + ' eval program', true);
     return;
   }
+  if (state.timing) state.timing.decoded = performance.now();
   const g = programsGlsl(named, 'u_tables', state.contract);
+  if (state.timing) state.timing.translated = performance.now();
   const spectral = m.mode === 'spectral';
   const src = fragmentSource(g.source, spectral, !!progs.coherent);
   state.source = src;
@@ -539,10 +543,13 @@ function compile() {
       }
     }
   }
-  if (state.shader) gl.deleteTexture(state.shader.tex);
+
   const prog = cached.prog, locs = cached.locs;
   // The tables, one R32F texture.
-  const tex = floatTexture(gl, 0, gl.R32F, gl.RED, g.width, g.height, g.tables);
+  // (one texture object for every material: its storage respecified)
+  const tex = floatTexture(gl, 0, gl.R32F, gl.RED, g.width, g.height, g.tables, state.tableTex);
+  state.tableTex = tex;
+  if (state.timing) state.timing.uploaded = performance.now();
   const loc = (name) => (name in locs ? locs[name] : (locs[name] = gl.getUniformLocation(prog, name)));
   state.shader = {prog, tex, loc, params: g.params, spectral, reused, directories: g.directories,
                   ops: named.reduce((a, [, p]) => a + p.code.length, 0),
@@ -556,11 +563,17 @@ function compile() {
   for (const k of g.params) {
     state.uniforms[k] = typeof state.params[k] === 'number' ? state.params[k] : state.built[k].value;
   }
-  // The first pass compiles the shader for the GPU (SwiftShader: here).
+  // A first draw of one pixel, in the passes' state, compiles the shader
+  // for the GPU (SwiftShader: here); the frame clears it.
   ensureTarget();
   gl.bindFramebuffer(gl.FRAMEBUFFER, state.target.fb);
+  gl.enable(gl.BLEND);
+  gl.enable(gl.SCISSOR_TEST);
+  gl.scissor(0, 0, 1, 1);
   drawPass(passes(0)[0], 1);
   gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.FLOAT, new Float32Array(4));
+  gl.disable(gl.SCISSOR_TEST);
+  gl.disable(gl.BLEND);
   gl.bindFramebuffer(gl.FRAMEBUFFER, null);
   state.compileMs = performance.now() - started;
   restart();
@@ -577,10 +590,12 @@ function compile() {
     state.accumulated = 0;
     state.passList = passes(0);
     state.next = 0;
+    state.timing.ready = performance.now();
     renderSome(true);
     display();
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
     state.rebuildMs = performance.now() - state.rebuildStarted;
+    state.timing.shown = performance.now();
   }
   if (state.test) {
     // set=key:value,...: move parameters as a control would before reading
@@ -712,8 +727,8 @@ function drawPass(pass, first, output) {
 }
 
 // A float texture on texture unit `unit`, read texel by texel.
-function floatTexture(gl, unit, internal, format, width, height, data) {
-  const tex = gl.createTexture();
+function floatTexture(gl, unit, internal, format, width, height, data, reuse) {
+  const tex = reuse || gl.createTexture();
   gl.activeTexture(gl.TEXTURE0 + unit);
   gl.bindTexture(gl.TEXTURE_2D, tex);
   gl.texImage2D(gl.TEXTURE_2D, 0, internal, width, height, 0, format, gl.FLOAT, data);
@@ -859,7 +874,7 @@ function b64(floats) {
 function runTest() {
   const gl = state.gl, n = state.res;
   const out = {width: n, height: n, compile_ms: state.compileMs, ops: state.shader.ops,
-               renderer: state.renderer, moved: state.moved, rebuild_ms: state.rebuildMs,
+               renderer: state.renderer, moved: state.moved, rebuild_ms: state.rebuildMs, timing: state.timing,
                reused: state.shader.reused, build_s: state.material.build_s, uniforms: state.uniforms, source: q.has('source') ? state.source : undefined,
                xml: $('xml').textContent, dict: $('dict').textContent};
   const read = (scale) => {
