@@ -19,10 +19,7 @@ import argparse
 import base64
 import json
 import os
-import signal
-import subprocess
 import sys
-import urllib.parse
 
 import numpy as np
 
@@ -31,8 +28,6 @@ sys.path.insert(0, os.path.join(ROOT, 'python'))
 
 from stam_diffraction import explore  # noqa: E402
 
-CHROMIUM = ('chromium', '--headless', '--no-sandbox', '--use-gl=angle', '--use-angle=swiftshader',
-            '--enable-unsafe-swiftshader', '--window-size=900,700', '--remote-debugging-port=0')
 VIEWS = ('sphere', 'disc', 'patch')
 
 
@@ -45,14 +40,7 @@ def shoot(server, name, params, frame, res, strips, mode='rgb'):
     query = {'material': json.dumps(params), 'frame': json.dumps(frame), 'views': ','.join(VIEWS),
              'view': VIEWS[0], 'mode': mode, 'res': res, 'strips': strips, 'test': name,
              'wavelengths': 16, 'frames': 8}
-    proc = subprocess.Popen(CHROMIUM + (server.url + '?' + urllib.parse.urlencode(query),),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
-    try:
-        r = server.wait_result(name, 1800)
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    r = server.run_headless(query, 1800)
     if r is None or 'error' in r:
         raise RuntimeError('%s: %s' % (name, r and r.get('error')))
     return r

@@ -15,12 +15,10 @@ import base64
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
 import urllib.error
-import urllib.parse
 import urllib.request
 
 import numpy as np
@@ -33,8 +31,6 @@ from stam_diffraction import core, explore  # noqa: E402
 
 RES = 48
 VIEWS = ('sphere', 'disc', 'patch')
-CHROMIUM = ('chromium', '--headless', '--no-sandbox', '--use-gl=angle', '--use-angle=swiftshader',
-            '--enable-unsafe-swiftshader', '--window-size=900,700', '--remote-debugging-port=0')
 
 # One material per surface model (and the rigorous disc) and its frame; each
 # view's light is the page's own for that view.
@@ -85,14 +81,7 @@ def render(server, name, params, frame, light=None, mode='rgb', views=VIEWS, ext
 
 def browse(server, name, query):
     """What the page in test mode posted for `query` (its own browser)."""
-    url = server.url + '?' + urllib.parse.urlencode(query)
-    proc = subprocess.Popen(CHROMIUM + (url,), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        result = server.wait_result(name, 240)
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+    result = server.run_headless(dict(query, test=name))
     assert result is not None, 'the page posted nothing in 240 s'
     return result
 

@@ -132,6 +132,18 @@ MIXTURE_COHERENT = _MIXTURE['COHERENT']
 MIXTURE_KINDS = _MIXTURE['KINDS']
 MIXTURE_MAX_WAVELENGTHS = _MIXTURE['MAX_WAVELENGTHS']
 
+# How far (relative) a renderer may move a parameter a program reads before
+# it builds the material anew (stam.h's STAM_PROGRAM_MAX_DRIFT, read from it).
+def _header_float(name, path=HEADER):
+    with open(path) as f:
+        found = re.findall(r'^#define\s+STAM_%s\s+(\S+)' % name, f.read(), re.M)
+    if len(found) != 1:
+        raise RuntimeError('stam_diffraction.core: %s lacks STAM_%s' % (path, name))
+    return float(found[0])
+
+
+PROGRAM_MAX_DRIFT = _header_float('PROGRAM_MAX_DRIFT')
+
 # The program array (stam.h: STAM_PROGRAM_FORMAT, read from it): a header of
 # PROGRAM_HEADER_LEN values (format, inputs, outputs, instructions, tables,
 # total length, parameters, 0), the output registers, (offset, length) per

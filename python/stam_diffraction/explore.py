@@ -21,18 +21,22 @@ Endpoints (JSON): GET /api/contract (the program format, from stam.h),
 GET /api/reference (the parameter reference, the plugin's frame keys, the
 presets), POST /api/material {"params": {...}, "mode": "rgb" | "spectral",
 "wavelengths": N} (the programs as base64 float32, the resolved parameters,
-warnings, the XML and the dict; 400 with the core's message for a bad
+warnings, the mi.load_dict dict, from which the page writes the XML; 400 with the core's message for a bad
 material), POST /api/result and GET /api/result (what a page in test mode
 read back from its float framebuffer).
 """
 
 import argparse
 import base64
+import functools
 import json
 import os
+import signal
+import subprocess
 import sys
 import threading
 import time
+import urllib.parse
 import webbrowser
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
@@ -76,6 +80,9 @@ MODE_PROGRAMS = {
     'spectral': {'eval': core.PROGRAM_EVAL_SPECTRAL, 'coherent': core.PROGRAM_COHERENT_SPECTRAL},
 }
 WAVELENGTHS_NM = (360.0, 830.0)
+# Debian's Chromium, headless, WebGL2 through SwiftShader (tests, pictures).
+CHROMIUM = ('chromium', '--headless', '--no-sandbox', '--use-gl=angle', '--use-angle=swiftshader',
+            '--enable-unsafe-swiftshader', '--window-size=900,700', '--remote-debugging-port=0')
 MAX_WAVELENGTHS = 64
 
 
@@ -84,14 +91,7 @@ def contract():
     return {'format': core.PROGRAM_FORMAT, 'header_len': core.PROGRAM_HEADER_LEN,
             'ops': {name: code for code, name in enumerate(core.PROGRAM_OPS)},
             'params': list(core.PROGRAM_PARAMS),
-            'max_drift': _max_drift()}
-
-
-def _max_drift():
-    for line in open(core.HEADER):
-        if line.startswith('#define STAM_PROGRAM_MAX_DRIFT'):
-            return float(line.split()[2])
-    raise RuntimeError('stam_diffraction.explore: no STAM_PROGRAM_MAX_DRIFT in %s' % core.HEADER)
+            'max_drift': core.PROGRAM_MAX_DRIFT}
 
 
 def height_maps(root):
@@ -111,11 +111,13 @@ def reference(root='.'):
             'preset_frames': PRESET_FRAMES, 'height_maps': height_maps(root)}
 
 
+@functools.lru_cache(maxsize=None)
 def spectral_weights(n):
     """n wavelengths (the midpoints of n equal bins of 360-830 nm) and their
     linear sRGB weights (n, 3): the CIE 1931 observer under D65, as Mitsuba's
     film converts a spectral render, normalised so that a reflectance of 1
-    at every wavelength gives (1, 1, 1). From Mitsuba's own CIE tables."""
+    at every wavelength gives (1, 1, 1). From Mitsuba's own CIE tables;
+    computed once per n (read-only arrays)."""
     import mitsuba as mi
     lo, hi = WAVELENGTHS_NM
     lam = lo + (np.arange(n) + 0.5) * (hi - lo) / n
@@ -129,15 +131,15 @@ def spectral_weights(n):
         for x in lam:
             si.wavelengths = [float(x)] * 4
             illum.append(float(d65.eval(si)[0]))
+        xyz *= np.array(illum)[:, None]
+        # Mitsuba's own XYZ -> linear sRGB
+        rgb = np.array([list(mi.xyz_to_srgb(mi.Color3f(*c))) for c in xyz])
     finally:
         if before:
             mi.set_variant(before)
-    xyz *= np.array(illum)[:, None]
-    to_srgb = np.array([[3.2404542, -1.5371385, -0.4985314],
-                        [-0.9692660, 1.8760108, 0.0415560],
-                        [0.0556434, -0.2040259, 1.0572252]])
-    rgb = xyz @ to_srgb.T
     rgb /= rgb.sum(axis=0, keepdims=True)
+    lam.setflags(write=False)
+    rgb.setflags(write=False)
     return lam, rgb
 
 
@@ -186,25 +188,12 @@ def mitsuba_props(params, frame):
     return props
 
 
+@functools.lru_cache(maxsize=None)
 def _integer_keys():
+    """The keys the core's reference calls integers (read once)."""
     ref = core.parameter_reference()
     docs = ref['material'] + [k for s in ref['surfaces'] for k in s['keys']]
     return {d['key'] for d in docs if d['integer']}
-
-
-def _number(v):
-    return repr(float(v)).replace('.0e', 'e') if isinstance(v, float) else str(v)
-
-
-def mitsuba_xml(params, frame):
-    """The <bsdf type="diffraction"> element of the material."""
-    lines = ['<bsdf type="diffraction">']
-    for name, kind, value in mitsuba_props(params, frame):
-        text = str(value).lower() if kind == 'boolean' else (
-            _number(value) if kind in ('float', 'integer') else value)
-        lines.append('    <%s name="%s" value="%s"/>' % (kind, name, text))
-    lines.append('</bsdf>')
-    return '\n'.join(lines)
 
 
 def mitsuba_dict(params, frame):
@@ -235,7 +224,7 @@ def build_material(params, mode='rgb', wavelengths=16, frame=None, root='.'):
         resolved = b.resolved_params()
         warnings = b.warnings()
     out = {'programs': programs, 'resolved': resolved, 'warnings': warnings,
-           'xml': mitsuba_xml(params, frame), 'dict': mitsuba_dict(params, frame),
+           'dict': mitsuba_dict(params, frame),
            'build_s': time.perf_counter() - start, 'mode': mode}
     if mode == 'spectral':
         n = int(wavelengths)
@@ -293,6 +282,19 @@ class Explorer:
         with self.result_event:
             self.result_event.wait_for(lambda: name in self.results, timeout)
             return self.results.get(name)
+
+    def run_headless(self, query, timeout=240):
+        """Loads the page with `query` (a dict; its 'test' names the result)
+        in a headless Chromium of its own and returns what the page posted,
+        or None after timeout s; the browser is stopped either way."""
+        url = self.url + '?' + urllib.parse.urlencode(query)
+        proc = subprocess.Popen(CHROMIUM + (url,), stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, start_new_session=True)
+        try:
+            return self.wait_result(query['test'], timeout)
+        finally:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
 
     def _handler(self):
         explorer = self
