@@ -262,7 +262,8 @@ function buildControls() {
        () => { if (state.mode === 'spectral') requestBuild(300); });
   knob('azimuth', {unit: 'deg', min: -180, max: 180, meaning: 'light azimuth (drag on the picture)'}, () => {});
   knob('elevation', {unit: 'deg', min: 1, max: 90, meaning: 'light elevation'}, () => {});
-  knob('strips', {integer: true, min: 0, max: 16, meaning: 'samples per strip light (0: off)'}, () => compile());
+  // (the strips are passes, not code: a new count redraws, compiles nothing)
+  knob('strips', {integer: true, min: 0, max: 16, meaning: 'samples per strip light (0: off)'}, () => {});
   knob('exposure', {min: 0.001, max: 1000, meaning: 'linear scale before the sRGB curve'}, () => {});
   knob('res', {integer: true, min: 64, max: 2048, meaning: 'canvas size in pixels'}, () => resize());
 }
@@ -576,7 +577,7 @@ function compile() {
   gl.disable(gl.BLEND);
   gl.bindFramebuffer(gl.FRAMEBUFFER, null);
   state.compileMs = performance.now() - started;
-  restart();
+  state.dirty = true;
   setStatus(statusLine());
   if (state.test && q.has('rebuild') && !state.rebuildStarted) {
     // rebuild=<JSON params>: a change that needs the core, timed from the
@@ -814,10 +815,6 @@ function display() {
   gl.uniform1f(gl.getUniformLocation(state.displayProg, 'u_exposure'),
                state.exposure / (state.accumulated + (state.passList.done ? 1 : 0) || 1));
   gl.drawArrays(gl.TRIANGLES, 0, 3);
-}
-
-function restart() {
-  state.dirty = true;
 }
 
 function loop() {
