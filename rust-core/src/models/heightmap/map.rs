@@ -95,6 +95,9 @@ impl HeightField {
     }
 }
 
+/// A map's values as a reader gives them: (nx, ny, row-major values).
+type MapValues = (usize, usize, Vec<f64>);
+
 /// The values of the map file `path` as (nx, ny, row-major values).
 pub fn read_map(path: &str) -> Result<(usize, usize, Vec<f64>), StamError> {
     let bytes = std::fs::read(path).map_err(|e| {
@@ -103,22 +106,23 @@ pub fn read_map(path: &str) -> Result<(usize, usize, Vec<f64>), StamError> {
         ))
     })?;
     let lower = path.to_ascii_lowercase();
-    if lower.ends_with(".npy") {
-        read_npy(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+    let reader: fn(&[u8]) -> Result<MapValues, String> = if lower.ends_with(".npy") {
+        read_npy
     } else if lower.ends_with(".csv") || lower.ends_with(".txt") {
-        read_csv(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+        read_csv
     } else if lower.ends_with(".exr") {
-        read_exr(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+        read_exr
     } else if lower.ends_with(".png") {
-        read_png(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+        read_png
     } else if lower.ends_with(".tif") || lower.ends_with(".tiff") {
-        read_tiff(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
+        read_tiff
     } else {
-        Err(StamError::new(format!(
+        return Err(StamError::new(format!(
             "parameter 'file' = '{path}': accepted formats are .npy, .exr, .tif/.tiff, .png and \
              .csv (another image converts with numpy: np.save('map.npy', imageio.imread(...)))"
-        )))
-    }
+        )));
+    };
+    reader(&bytes).map_err(|e| StamError::new(format!("height map '{path}': {e}")))
 }
 
 /// A PNG image's gray values (8 or 16 bits; an alpha channel is ignored),
