@@ -235,6 +235,11 @@ impl Brdf {
         }
     }
 
+    /// The material's RGB rule (its nodes, F^2 folded in).
+    pub fn rgb_rule(&self) -> &RgbRule {
+        &self.rgb_rule
+    }
+
     pub fn fresnel(&self) -> &Fresnel {
         &self.fresnel
     }

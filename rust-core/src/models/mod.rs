@@ -447,6 +447,14 @@ impl Surface {
         }
     }
 
+    /// The height-map model, if this is one (tests, the RGB survey).
+    pub fn height_map(&self) -> Option<&heightmap::HeightMap> {
+        match self {
+            Surface::HeightMap(m) => Some(m),
+            _ => None,
+        }
+    }
+
     /// The same, mutable.
     pub fn gaussian_mut(&mut self) -> Option<&mut Gaussian> {
         match self {

@@ -24,12 +24,14 @@ pub mod params;
 mod program;
 #[cfg(test)]
 mod program_tests;
+pub(crate) mod rgb;
 mod sampling;
 #[cfg(test)]
 mod tests;
 mod welch;
 
 pub use params::HeightMapParams;
+pub use rgb::RgbTable;
 pub use sampling::Lobe;
 pub use welch::SpectrumTable;
 
@@ -43,7 +45,7 @@ use crate::program::Real;
 use crate::sampling::Component;
 use crate::spectrum::wavenumber_per_um;
 use std::f64::consts::PI;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// 1 / (4 pi^2).
 const INV_4PI2: f64 = 1.0 / (4.0 * PI * PI);
@@ -51,12 +53,16 @@ const INV_4PI2: f64 = 1.0 / (4.0 * PI * PI);
 /// The height-map model of a material: the map's tables.
 pub struct HeightMap {
     table: Arc<SpectrumTable>,
+    /// The RGB rule's sum over (|w|, u, v), built on the first RGB
+    /// evaluation (`rgb.rs`).
+    rgb: OnceLock<Option<RgbTable>>,
 }
 
 impl HeightMap {
     pub fn new(p: &HeightMapParams) -> Result<HeightMap, StamError> {
         Ok(HeightMap {
             table: cache::table(p)?,
+            rgb: OnceLock::new(),
         })
     }
 
@@ -74,12 +80,47 @@ impl HeightMap {
         v: R,
         fetch: impl Fn(R) -> R,
     ) -> R {
-        let nu_scale = k_per_um * (0.5 / PI);
-        let t = self
-            .table
-            .read(k_per_um * w_abs, u * nu_scale, v * nu_scale, fetch);
-        let k2 = k_per_um * k_per_um;
-        t * (k2 * k2) * INV_4PI2
+        self.table.kernel(k_per_um, w_abs, u, v, fetch)
+    }
+
+    /// The material's RGB table, built on its first RGB evaluation from
+    /// the shading's rule and Fresnel term (one material has one of each);
+    /// None when it failed its build's check (`rgb::CHECK_P90`: the map is
+    /// too sharp for it), and the rule's nodes serve.
+    pub(crate) fn rgb_table(&self, shading: &Shading) -> Option<&RgbTable> {
+        self.rgb
+            .get_or_init(|| RgbTable::build_checked(&self.table, shading.rgb_rule, shading.fresnel))
+            .as_ref()
+    }
+
+    /// Bytes of the RGB table, 0 before the first RGB evaluation.
+    pub fn rgb_table_bytes(&self) -> usize {
+        self.rgb
+            .get()
+            .and_then(Option::as_ref)
+            .map_or(0, RgbTable::memory_bytes)
+    }
+
+    /// The RGB table's grid (w nodes, u and v points, u and v extents),
+    /// None before the first RGB evaluation.
+    pub fn rgb_table_shape(&self) -> Option<(usize, usize, usize, f64, f64)> {
+        self.rgb.get().and_then(Option::as_ref).map(RgbTable::shape)
+    }
+
+    /// F^2 K in RGB by the rule's nodes, one read of T each (what the RGB
+    /// table tabulates; the tests compare the two).
+    pub(crate) fn reflectance_rgb_by_nodes(
+        &self,
+        shading: &Shading,
+        geom: &PairGeometry,
+    ) -> [f64; 3] {
+        let rule = shading.rgb_rule;
+        let mut values = [0.0; MAX_RGB_NODES];
+        let values = &mut values[..rule.len()];
+        for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
+            *v = self.kernel(k, geom);
+        }
+        shading.integrate(geom.cos_half, values)
     }
 
     /// |chi(2 k cos_i)|^2, any `Real`.
@@ -103,6 +144,22 @@ impl HeightMap {
 }
 
 impl SpectrumTable {
+    /// K at wavenumber k for the pair's (u, v, |w|), any `Real`.
+    #[inline]
+    pub(crate) fn kernel<R: Real>(
+        &self,
+        k_per_um: R,
+        w_abs: R,
+        u: R,
+        v: R,
+        fetch: impl Fn(R) -> R,
+    ) -> R {
+        let nu_scale = k_per_um * (0.5 / PI);
+        let t = self.read(k_per_um * w_abs, u * nu_scale, v * nu_scale, fetch);
+        let k2 = k_per_um * k_per_um;
+        t * (k2 * k2) * INV_4PI2
+    }
+
     /// T at (kappa, nu): linear in s = ln(1 + kappa / kappa_0) between
     /// nodes, bilinear in nu on the frequency grid (8 fetches), 0 beyond
     /// the grid's Nyquist frequency.
@@ -170,7 +227,7 @@ impl SurfaceModel for HeightMap {
     }
 
     fn memory_bytes(&self) -> usize {
-        self.table.memory_bytes()
+        self.table.memory_bytes() + self.rgb_table_bytes()
     }
 
     #[inline]
@@ -178,14 +235,19 @@ impl SurfaceModel for HeightMap {
         self.kernel_with(k_per_um, geom.w.abs(), geom.u, geom.v, self.fetch_value())
     }
 
+    /// The RGB table's read; the energy factor is colour-neutral for
+    /// height maps (`energy_hint`), so one of its values scales the sum.
     fn reflectance_rgb(&self, shading: &Shading, geom: &PairGeometry) -> [f64; 3] {
-        let rule = shading.rgb_rule;
-        let mut values = [0.0; MAX_RGB_NODES];
-        let values = &mut values[..rule.len()];
-        for (v, &k) in values.iter_mut().zip(&rule.k_per_um) {
-            *v = self.kernel(k, geom);
-        }
-        shading.integrate(geom.cos_half, values)
+        let Some(rgb_table) = self.rgb_table(shading) else {
+            return self.reflectance_rgb_by_nodes(shading, geom);
+        };
+        let rgb = rgb_table.read(geom.w.abs(), geom.u, geom.v, |at| {
+            rgb_table.values[at as usize] as f64
+        });
+        let factor = shading
+            .pair_factor
+            .map_or(1.0, |f| f(shading.rgb_rule.lambda_nm()[0]));
+        rgb.map(|c| c * factor)
     }
 
     fn coherent_spectral(&self, shading: &Shading, cos_i: f64, lambda_nm: f64) -> f64 {

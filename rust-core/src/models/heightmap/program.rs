@@ -3,9 +3,10 @@
 //! `chi2_read`, `mirror_nodes`, the grid's cells, `draw_alias`), written
 //! once over `program::Real`, with a gather as their fetch.
 //!
-//! - K: 8 gathers (two nodes' bilinear cells) and one log; RGB: the same
-//!   at each node of the RGB rule, then the rule with the Fresnel term
-//!   folded in (`RgbRule::integrate_program`).
+//! - K: 8 gathers (two nodes' bilinear cells) and one log; RGB: the RGB
+//!   table's trilinear read (24 gathers, one log: `rgb.rs`), or for a map
+//!   too sharp for it the same K at each node of the RGB rule, then the
+//!   rule with the Fresnel term folded in (`RgbRule::integrate_program`).
 //! - The coherent lobe: |chi|^2 by two gathers per wavelength.
 //! - Sampling: the native strategy (`sampling.rs`) exactly: the component
 //!   (RGB: one of the four sampling wavelengths), then the coherent lobe,
@@ -96,6 +97,7 @@ impl SurfacePrograms for HeightMap {
         )
     }
 
+    /// The RGB table's read (`rgb.rs`: 8 points of 3 channels, one log).
     /// Height-map tables are colour-neutral (the material scales outside):
     /// no per-wavelength factor.
     fn reflectance_rgb_program<'a>(
@@ -108,9 +110,14 @@ impl SurfacePrograms for HeightMap {
         if factor.is_some() {
             return None;
         }
+        let w_abs = pair.w.abs();
+        if let Some(rgb_table) = self.rgb_table(shading) {
+            let values = b.table(rgb_table.values.clone());
+            return Some(rgb_table.read(w_abs, pair.u, pair.v, |at| b.gather(values, at)));
+        }
+        // A map too sharp for the table: the rule's nodes.
         let rule = shading.rgb_rule;
         let table = b.table(self.table().values.clone());
-        let w_abs = pair.w.abs();
         let values: Vec<Value> = rule
             .k_per_um
             .iter()

@@ -4,6 +4,7 @@
 //! and their refusals, and the native sampling by chi-square.
 
 use super::map::HeightField;
+use super::rgb::{self, RgbTable};
 use super::welch::SpectrumTable;
 use crate::benchmark::SplitMix64 as Rng;
 use crate::benchmark::{gaussian_psd, npy_bytes, synthetic_height_map as synthetic_map};
@@ -772,19 +773,10 @@ fn fractal_maps_give_the_fractal_brdf() {
     assert!((0.9..1.1).contains(&q(0.5)), "median {}", q(0.5));
 }
 
-/// Survey: the RGB rule's error against the 1 nm reference (gamut-mapped,
-/// relative to the pair's largest channel) and its cost, by node count,
-/// on the Gaussian map and a sine grating map, at pairs over the lobes.
-#[test]
-#[ignore]
-fn rgb_nodes_survey() {
-    let n = 512;
-    let grating: Vec<f64> = (0..n * n)
-        .map(|i| 0.06 * (2.0 * PI * (i % n) as f64 * 0.08 / 1.6).sin())
-        .collect();
-    let grating = write_npy("survey-grating.npy", n, n, &grating);
-    let mut rng = Rng(8);
-    let pairs: Vec<(DVec3, DVec3)> = (0..300)
+/// Pairs over the lobes of incidences up to 60 degrees (the RGB surveys).
+fn lobe_pairs(count: usize, seed: u64) -> Vec<(DVec3, DVec3)> {
+    let mut rng = Rng(seed);
+    (0..count)
         .map(|_| {
             let [a, b, c] = rng.three();
             let wi = incidence(60.0 * a, 6.0 * b);
@@ -795,10 +787,146 @@ fn rgb_nodes_survey() {
             (wi, wo)
         })
         .filter(|(_, wo)| wo.z > 0.05)
+        .collect()
+}
+
+/// A sine grating map along x (period 1.6 um, 0.12 um peak to peak).
+fn grating_map_file(n: usize) -> PathBuf {
+    let grating: Vec<f64> = (0..n * n)
+        .map(|i| 0.06 * (2.0 * PI * (i % n) as f64 * 0.08 / 1.6).sin())
         .collect();
+    write_npy(&format!("grating-{n}.npy"), n, n, &grating)
+}
+
+/// Per pair, the largest channel's error of `got` against `want` relative
+/// to the pair's largest channel (pairs above 1e-6), sorted.
+fn rgb_errors(got: &[[f64; 3]], want: &[[f64; 3]]) -> Vec<f64> {
+    let mut errors: Vec<f64> = got
+        .iter()
+        .zip(want)
+        .filter(|(_, r)| r.iter().cloned().fold(0.0, f64::max) > 1e-6)
+        .map(|(g, r)| {
+            let scale = r.iter().cloned().fold(0.0, f64::max);
+            (0..3)
+                .map(|c| (g[c] - r[c]).abs() / scale)
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    errors
+}
+
+fn quantile(sorted: &[f64], p: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * p) as usize]
+}
+
+/// The per-node RGB path of a height-map material (what its RGB table
+/// tabulates).
+fn eval_rgb_by_nodes(brdf: &Brdf, wi: DVec3, wo: DVec3) -> [f64; 3] {
+    let map = brdf.surface().height_map().expect("a height map");
+    brdf.eval_rgb_by(wi, wo, |shading, geom| {
+        map.reflectance_rgb_by_nodes(shading, geom)
+    })
+}
+
+/// The RGB table against the rule's nodes it tabulates, over the lobes of
+/// a Gaussian map and a sine grating map, gold: its interpolation error,
+/// relative to the pair's largest channel, its build's check, and, on the
+/// Gaussian map, both paths against the Gaussian model the map was drawn
+/// from. The grating map fails the check and keeps the nodes.
+#[test]
+fn rgb_table_against_the_nodes() {
+    let pairs = lobe_pairs(400, 8);
+    let rms = |e: &[f64]| (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt();
+    for (name, file, serves) in [
+        ("gaussian map", gaussian_map_file(), true),
+        ("grating map", grating_map_file(256), false),
+    ] {
+        let brdf = material(&map_json(&file, r#","fresnel":"gold""#));
+        let map = brdf.surface().height_map().expect("a height map");
+        let (rule, fresnel) = (brdf.rgb_rule(), brdf.fresnel());
+        let start = std::time::Instant::now();
+        let rgb = RgbTable::build(map.table(), rule, fresnel);
+        let build_s = start.elapsed().as_secs_f64();
+        let check = rgb.check_p90(map.table(), rule, fresnel, None);
+        println!(
+            "{name}: RGB table {:?}, {:.1} MB in {build_s:.2} s; check p90 {check:.2e} (serves at most {:.0e})",
+            rgb.shape(),
+            rgb.memory_bytes() as f64 / 1e6,
+            rgb::CHECK_P90
+        );
+        let eval_all = |eval: &dyn Fn(DVec3, DVec3) -> [f64; 3]| -> Vec<[f64; 3]> {
+            pairs.iter().map(|&(wi, wo)| eval(wi, wo)).collect()
+        };
+        let nodes = eval_all(&|wi, wo| eval_rgb_by_nodes(&brdf, wi, wo));
+        let table = eval_all(&|wi, wo| {
+            brdf.eval_rgb_by(wi, wo, |_, geom| {
+                rgb.read(geom.w.abs(), geom.u, geom.v, |at| {
+                    rgb.values[at as usize] as f64
+                })
+            })
+        });
+        let used = eval_all(&|wi, wo| brdf.eval_rgb(wi, wo));
+        assert_eq!(check <= rgb::CHECK_P90, serves, "{name}: check {check}");
+        assert_eq!(map.rgb_table_shape().is_some(), serves, "{name}");
+        assert!(
+            used == if serves { table.clone() } else { nodes.clone() },
+            "{name}"
+        );
+        let errors = rgb_errors(&table, &nodes);
+        let (p50, p90, max) = (
+            quantile(&errors, 0.5),
+            quantile(&errors, 0.9),
+            quantile(&errors, 1.0),
+        );
+        println!(
+            "{name}: RGB table against its nodes over the lobes, p50 {p50:.2e}, p90 {p90:.2e}, max {max:.2e} ({} pairs)",
+            errors.len()
+        );
+        assert!(errors.len() > 200, "{name}: {} pairs", errors.len());
+        if !serves {
+            continue;
+        }
+        assert!(p90 < 5e-2 && max < 0.15, "{name}: p90 {p90}, max {max}");
+        // Both paths against the Gaussian model the map was drawn from
+        // (its own RGB path, 2.5e-5 off its nodes): the table's
+        // interpolation is lost in the map's own deviation.
+        let model =
+            material(r#"{"surface":"gaussian","sigma_um":0.05,"corr_um":1,"fresnel":"gold"}"#);
+        let truth = eval_all(&|wi, wo| model.eval_rgb(wi, wo));
+        let peak = truth.iter().flatten().cloned().fold(0.0, f64::max);
+        let bright: Vec<usize> = (0..pairs.len())
+            .filter(|&i| truth[i].iter().cloned().fold(0.0, f64::max) > 0.1 * peak)
+            .collect();
+        let pick = |v: &[[f64; 3]]| bright.iter().map(|&i| v[i]).collect::<Vec<_>>();
+        let truth = pick(&truth);
+        let by_table = rgb_errors(&pick(&table), &truth);
+        let by_nodes = rgb_errors(&pick(&nodes), &truth);
+        println!(
+            "{name} against the Gaussian model ({} bright pairs): table p50 {:.3}, p90 {:.3}, rms {:.3}; nodes p50 {:.3}, p90 {:.3}, rms {:.3}",
+            truth.len(),
+            quantile(&by_table, 0.5),
+            quantile(&by_table, 0.9),
+            rms(&by_table),
+            quantile(&by_nodes, 0.5),
+            quantile(&by_nodes, 0.9),
+            rms(&by_nodes)
+        );
+        assert!(rms(&by_table) < 1.05 * rms(&by_nodes) + 2e-3);
+    }
+}
+
+/// Survey: the RGB rule's error against the 1 nm reference (gamut-mapped,
+/// relative to the pair's largest channel) and its cost, by node count,
+/// on the Gaussian map and a sine grating map, at pairs over the lobes:
+/// by the RGB table (what renders use) and by the nodes it tabulates.
+#[test]
+#[ignore]
+fn rgb_nodes_survey() {
+    let pairs = lobe_pairs(300, 8);
     for (name, file) in [
         ("gaussian map", gaussian_map_file()),
-        ("grating map", grating),
+        ("grating map", grating_map_file(512)),
     ] {
         let reference = material(&map_json(&file, r#","fresnel":"gold""#));
         let refs: Vec<[f64; 3]> = pairs
@@ -810,31 +938,30 @@ fn rgb_nodes_survey() {
                 &file,
                 &format!(r#","fresnel":"gold","rgb_nodes":{nodes}"#),
             ));
-            let start = std::time::Instant::now();
-            let got: Vec<[f64; 3]> = pairs
-                .iter()
-                .map(|&(wi, wo)| brdf.eval_rgb(wi, wo))
-                .collect();
-            let ns = start.elapsed().as_nanos() as f64 / pairs.len() as f64;
-            let mut errors: Vec<f64> = got
-                .iter()
-                .zip(&refs)
-                .filter(|(_, r)| r.iter().cloned().fold(0.0, f64::max) > 1e-6)
-                .map(|(g, r)| {
-                    let scale = r.iter().cloned().fold(0.0, f64::max);
-                    (0..3)
-                        .map(|c| (g[c] - r[c]).abs() / scale)
-                        .fold(0.0, f64::max)
-                })
-                .collect();
-            errors.sort_by(f64::total_cmp);
-            let q = |p: f64| errors[((errors.len() - 1) as f64 * p) as usize];
+            let build = std::time::Instant::now();
+            brdf.eval_rgb(pairs[0].0, pairs[0].1);
+            let build_s = build.elapsed().as_secs_f64();
+            let time = |eval: &dyn Fn(DVec3, DVec3) -> [f64; 3]| {
+                let start = std::time::Instant::now();
+                let got: Vec<[f64; 3]> = pairs.iter().map(|&(wi, wo)| eval(wi, wo)).collect();
+                (got, start.elapsed().as_nanos() as f64 / pairs.len() as f64)
+            };
+            let (table, table_ns) = time(&|wi, wo| brdf.eval_rgb(wi, wo));
+            let (by_nodes, nodes_ns) = time(&|wi, wo| eval_rgb_by_nodes(&brdf, wi, wo));
+            for (path, got, ns) in [("table", table, table_ns), ("nodes", by_nodes, nodes_ns)] {
+                let errors = rgb_errors(&got, &refs);
+                println!(
+                    "{name}, {nodes} nodes, {path}: p50 {:.2e}, p90 {:.2e}, max {:.2e} ({} pairs), {ns:.0} ns per eval",
+                    quantile(&errors, 0.5),
+                    quantile(&errors, 0.9),
+                    quantile(&errors, 1.0),
+                    errors.len()
+                );
+            }
+            let map = brdf.surface().height_map().expect("a height map");
             println!(
-                "{name}, {nodes} nodes: p50 {:.2e}, p90 {:.2e}, max {:.2e} ({} pairs), {ns:.0} ns per eval",
-                q(0.5),
-                q(0.9),
-                q(1.0),
-                errors.len()
+                "{name}, {nodes} nodes: RGB table built in {build_s:.2} s, {:.1} MB",
+                map.rgb_table_bytes() as f64 / 1e6
             );
         }
     }
