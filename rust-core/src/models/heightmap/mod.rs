@@ -70,19 +70,6 @@ impl HeightMap {
         &self.table
     }
 
-    /// K at wavenumber k for the pair's (u, v, |w|), any `Real`.
-    #[inline]
-    pub(crate) fn kernel_with<R: Real>(
-        &self,
-        k_per_um: R,
-        w_abs: R,
-        u: R,
-        v: R,
-        fetch: impl Fn(R) -> R,
-    ) -> R {
-        self.table.kernel(k_per_um, w_abs, u, v, fetch)
-    }
-
     /// The material's RGB table, built on its first RGB evaluation from
     /// the shading's rule and Fresnel term (one material has one of each);
     /// None when it failed its build's check (`rgb::CHECK_P90`: the map is
@@ -143,6 +130,25 @@ impl HeightMap {
     }
 }
 
+/// The bilinear read of the 2 x 2 entries at `at`, `at + dx`, `at + dy`
+/// and `at + dx + dy`, weights `tx` along x and `ty` along y (the tables'
+/// (u, v) cells), any `Real`.
+#[inline]
+pub(crate) fn bilinear<R: Real>(
+    fetch: &impl Fn(R) -> R,
+    at: R,
+    dx: f64,
+    dy: f64,
+    tx: R,
+    ty: R,
+) -> R {
+    let (v00, v01) = (fetch(at), fetch(at + dx));
+    let (v10, v11) = (fetch(at + dy), fetch(at + (dy + dx)));
+    let lo = v00 + (v01 - v00) * tx;
+    let hi = v10 + (v11 - v10) * tx;
+    lo + (hi - lo) * ty
+}
+
 impl SpectrumTable {
     /// K at wavenumber k for the pair's (u, v, |w|), any `Real`.
     #[inline]
@@ -175,13 +181,7 @@ impl SpectrumTable {
         let (ix, iy) = (fx.floor().min(n - 2.0), fy.floor().min(n - 2.0));
         let (tx, ty) = (fx - ix, fy - iy);
         let base = (i * n + iy) * n + ix;
-        let plane = |at: R| {
-            let (v00, v01) = (fetch(at), fetch(at + 1.0));
-            let (v10, v11) = (fetch(at + n), fetch(at + (n + 1.0)));
-            let lo = v00 + (v01 - v00) * tx;
-            let hi = v10 + (v11 - v10) * tx;
-            lo + (hi - lo) * ty
-        };
+        let plane = |at: R| bilinear(&fetch, at, 1.0, n, tx, ty);
         let (e0, e1) = (plane(base), plane(base + n * n));
         let e = e0 + (e1 - e0) * t;
         // The table holds T (1 + kappa / kappa_0)^4.
@@ -232,7 +232,8 @@ impl SurfaceModel for HeightMap {
 
     #[inline]
     fn kernel(&self, k_per_um: f64, geom: &PairGeometry) -> f64 {
-        self.kernel_with(k_per_um, geom.w.abs(), geom.u, geom.v, self.fetch_value())
+        self.table
+            .kernel(k_per_um, geom.w.abs(), geom.u, geom.v, self.fetch_value())
     }
 
     /// The RGB table's read; the energy factor is colour-neutral for

@@ -91,9 +91,10 @@ impl SurfacePrograms for HeightMap {
     ) -> Option<Value<'a>> {
         let values = b.table(self.table().values.clone());
         Some(
-            self.kernel_with(k_per_um, pair.w.abs(), pair.u, pair.v, |at| {
-                b.gather(values, at)
-            }),
+            self.table()
+                .kernel(k_per_um, pair.w.abs(), pair.u, pair.v, |at| {
+                    b.gather(values, at)
+                }),
         )
     }
 
@@ -121,7 +122,10 @@ impl SurfacePrograms for HeightMap {
         let values: Vec<Value> = rule
             .k_per_um
             .iter()
-            .map(|&k| self.kernel_with(b.c(k), w_abs, pair.u, pair.v, |at| b.gather(table, at)))
+            .map(|&k| {
+                self.table()
+                    .kernel(b.c(k), w_abs, pair.u, pair.v, |at| b.gather(table, at))
+            })
             .collect();
         Some(rule.integrate_program(b, shading.fresnel, pair.cos_half, &values))
     }

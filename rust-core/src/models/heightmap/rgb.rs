@@ -18,7 +18,7 @@
 //! error against the per-node path is measured in the tests
 //! (`rgb_table_against_the_nodes`, docs/heightmap.md).
 
-use super::SpectrumTable;
+use super::{bilinear, SpectrumTable};
 use crate::models::RgbRule;
 use crate::optics::fresnel::Fresnel;
 use crate::program::Real;
@@ -65,6 +65,26 @@ pub struct RgbTable {
     /// [w node][v point][u point][channel]: the sum times (1 + k_ref |w| /
     /// kappa_0)^4.
     pub values: Vec<f32>,
+}
+
+/// What the table holds at (|w|, u, v), by the rule's nodes (`nodes` their
+/// scratch values): K at each, summed with F^2 at the half vector's cosine
+/// |(u, v, w)| / 2.
+fn by_nodes(
+    table: &SpectrumTable,
+    rule: &RgbRule,
+    fresnel: &Fresnel,
+    w: f64,
+    u: f64,
+    v: f64,
+    nodes: &mut [f64],
+) -> [f64; 3] {
+    let fetch = |at: f64| table.values[at as usize] as f64;
+    for (value, &k) in nodes.iter_mut().zip(&rule.k_per_um) {
+        *value = table.kernel(k, w, u, v, fetch);
+    }
+    let cos_half = ((u * u + v * v + w * w).sqrt() * 0.5).min(1.0);
+    rule.integrate(fresnel, cos_half, nodes)
 }
 
 /// How far T reaches from the grid's centre, in cells along x and y: the
@@ -162,7 +182,6 @@ impl RgbTable {
 
     /// Computes the planes `which` of |w| nodes (all cores).
     fn fill(&mut self, which: &[usize], table: &SpectrumTable, rule: &RgbRule, fresnel: &Fresnel) {
-        let fetch = |at: f64| table.values[at as usize] as f64;
         let (n_u, n_v) = (self.n_u, self.n_v);
         let grid = &*self;
         let plane = |iw: usize| -> Vec<f32> {
@@ -172,14 +191,10 @@ impl RgbTable {
             let mut out = Vec::with_capacity(n_u * n_v * 3);
             let mut nodes = vec![0.0; rule.len()];
             for iy in 0..n_v {
-                let v = grid.point(iy, n_v, grid.v_max);
+                let v = grid.point_at(iy as f64, n_v, grid.v_max);
                 for ix in 0..n_u {
-                    let u = grid.point(ix, n_u, grid.u_max);
-                    for (value, &k) in nodes.iter_mut().zip(&rule.k_per_um) {
-                        *value = table.kernel(k, w, u, v, fetch);
-                    }
-                    let cos_half = ((u * u + v * v + w * w).sqrt() * 0.5).min(1.0);
-                    let rgb = rule.integrate(fresnel, cos_half, &nodes);
+                    let u = grid.point_at(ix as f64, n_u, grid.u_max);
+                    let rgb = by_nodes(table, rule, fresnel, w, u, v, &mut nodes);
                     out.extend(rgb.map(|c| (c * a4) as f32));
                 }
             }
@@ -250,7 +265,6 @@ impl RgbTable {
         if bright.is_empty() {
             return 0.0;
         }
-        let fetch = |at: f64| table.values[at as usize] as f64;
         let mut rng = SplitMix64(0x5eed);
         let mut nodes = vec![0.0; rule.len()];
         let mut errors: Vec<f64> = (0..CHECK_POINTS)
@@ -262,11 +276,7 @@ impl RgbTable {
                 let w = s.exp_m1() / self.w_scale;
                 let u = self.point_at(ix as f64 + b, n_u, self.u_max);
                 let v = self.point_at(iy as f64 + c, n_v, self.v_max);
-                for (value, &k) in nodes.iter_mut().zip(&rule.k_per_um) {
-                    *value = table.kernel(k, w, u, v, fetch);
-                }
-                let cos_half = ((u * u + v * v + w * w).sqrt() * 0.5).min(1.0);
-                let want = rule.integrate(fresnel, cos_half, &nodes);
+                let want = by_nodes(table, rule, fresnel, w, u, v, &mut nodes);
                 let got = self.read(w, u, v, |at| self.values[at as usize] as f64);
                 let scale = want.iter().cloned().fold(0.0, f64::max);
                 if scale > 0.0 {
@@ -286,11 +296,6 @@ impl RgbTable {
     /// [-extent, extent].
     fn point_at(&self, f: f64, count: usize, extent: f64) -> f64 {
         -extent + 2.0 * extent * f / (count - 1) as f64
-    }
-
-    /// Grid point i of `count` over [-extent, extent].
-    fn point(&self, i: usize, count: usize, extent: f64) -> f64 {
-        -extent + 2.0 * extent * i as f64 / (count - 1) as f64
     }
 
     pub fn memory_bytes(&self) -> usize {
@@ -323,15 +328,9 @@ impl RgbTable {
         let a2 = a * a;
         let inv_a4 = (a2 * a2).constant(1.0) / (a2 * a2);
         std::array::from_fn(|c| {
-            let bilinear = |at: R| {
-                let (v00, v01) = (fetch(at), fetch(at + 3.0));
-                let (v10, v11) = (fetch(at + row), fetch(at + (row + 3.0)));
-                let lo = v00 + (v01 - v00) * tx;
-                let hi = v10 + (v11 - v10) * tx;
-                lo + (hi - lo) * ty
-            };
             let at = base + c as f64;
-            let (e0, e1) = (bilinear(at), bilinear(at + plane));
+            let cell = |at: R| bilinear(&fetch, at, 3.0, row, tx, ty);
+            let (e0, e1) = (cell(at), cell(at + plane));
             let e = e0 + (e1 - e0) * tw;
             R::select(inside, e * inv_a4, u.constant(0.0))
         })
