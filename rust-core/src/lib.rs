@@ -18,6 +18,7 @@ pub mod material;
 pub mod models;
 pub mod optics;
 pub mod program;
+pub mod progress;
 pub mod rigorous;
 pub mod sampling;
 pub mod special;

@@ -24,11 +24,11 @@ use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock};
-use std::time::Instant;
 
 use super::layers::{Grating, Medium};
 use super::solver::{prepare, Factorisation};
 use crate::optics::profile::Profile;
+use crate::progress::Progress;
 use crate::StamError;
 
 /// Bump when the solver's results or the table's layout change: it keys the
@@ -663,9 +663,7 @@ pub(super) fn build_with(
         o
     };
     rows = order.iter().map(|&r| rows[r]).collect();
-    let start = Instant::now();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let last_report = Mutex::new(0.0f64);
+    let progress = Progress::new("rigorous grating efficiencies", rows.len());
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let next = std::sync::atomic::AtomicUsize::new(0);
     let results: Mutex<Vec<(usize, Row)>> = Mutex::new(Vec::with_capacity(rows.len()));
@@ -685,16 +683,7 @@ pub(super) fn build_with(
                         break;
                     }
                 }
-                let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                let elapsed = start.elapsed().as_secs_f64();
-                let mut last = last_report.lock().unwrap();
-                if elapsed > 1.0 && (elapsed - *last > 2.0 || finished == rows.len()) {
-                    *last = elapsed;
-                    eprintln!(
-                        "stam: rigorous grating efficiencies: {:.0}% ({elapsed:.0} s)",
-                        100.0 * finished as f64 / rows.len() as f64
-                    );
-                }
+                progress.step();
             });
         }
     });
@@ -704,7 +693,7 @@ pub(super) fn build_with(
     let mut results = results.into_inner().unwrap();
     results.sort_by_key(|(r, _)| *r);
     table.rows = results.into_iter().map(|(_, row)| row).collect();
-    table.build_seconds = start.elapsed().as_secs_f64();
+    table.build_seconds = progress.seconds();
     Ok(table)
 }
 

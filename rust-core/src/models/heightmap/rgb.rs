@@ -22,6 +22,7 @@ use super::{bilinear, SpectrumTable};
 use crate::models::RgbRule;
 use crate::optics::fresnel::Fresnel;
 use crate::program::Real;
+use crate::progress::Progress;
 use crate::sampling::SplitMix64;
 
 /// Grid points along u and v per frequency cell of T at the rule's bluest
@@ -203,6 +204,7 @@ impl RgbTable {
         let threads = std::thread::available_parallelism()
             .map_or(1, |n| n.get())
             .min(which.len().max(1));
+        let progress = &Progress::new("height map RGB table", which.len());
         let planes: Vec<(usize, Vec<f32>)> = std::thread::scope(|scope| {
             let plane = &plane;
             let handles: Vec<_> = (0..threads)
@@ -211,7 +213,11 @@ impl RgbTable {
                         which[t.min(which.len())..]
                             .iter()
                             .step_by(threads)
-                            .map(|&iw| (iw, plane(iw)))
+                            .map(|&iw| {
+                                let values = plane(iw);
+                                progress.step();
+                                (iw, values)
+                            })
                             .collect::<Vec<_>>()
                     })
                 })

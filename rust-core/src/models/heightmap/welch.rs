@@ -26,6 +26,7 @@
 //! spectra.
 
 use super::map::HeightField;
+use crate::progress::Progress;
 use crate::sampling::AliasTable;
 use crate::spectrum::{wavenumber_per_um, LAMBDA_MIN_NM};
 use num_complex::Complex;
@@ -95,13 +96,19 @@ impl SpectrumTable {
         let threads = std::thread::available_parallelism()
             .map_or(1, |n| n.get())
             .min(nodes);
+        // A 4096^2 map takes about 10 s: say how far it is.
+        let progress = &Progress::new("height map spectrum tables", nodes);
         let per_node: Vec<(Vec<f32>, AliasTable, f64)> = std::thread::scope(|scope| {
             let handles: Vec<_> = (0..threads)
                 .map(|t| {
                     scope.spawn(move || {
                         (t..nodes)
                             .step_by(threads)
-                            .map(|i| (i, node_values(field, tile, node_kappa(i), kappa0)))
+                            .map(|i| {
+                                let values = node_values(field, tile, node_kappa(i), kappa0);
+                                progress.step();
+                                (i, values)
+                            })
                             .collect::<Vec<_>>()
                     })
                 })
