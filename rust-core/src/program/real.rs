@@ -28,6 +28,7 @@ pub trait Real:
     fn constant(self, x: f64) -> Self;
     fn sqrt(self) -> Self;
     fn ln(self) -> Self;
+    fn exp(self) -> Self;
     fn max(self, other: f64) -> Self;
     fn min(self, other: f64) -> Self;
     fn clamp(self, lo: f64, hi: f64) -> Self;
@@ -58,6 +59,9 @@ impl Real for f64 {
     }
     fn ln(self) -> f64 {
         f64::ln(self)
+    }
+    fn exp(self) -> f64 {
+        f64::exp(self)
     }
     fn max(self, other: f64) -> f64 {
         f64::max(self, other)
@@ -111,6 +115,9 @@ impl<'a> Real for Value<'a> {
     }
     fn ln(self) -> Value<'a> {
         Value::ln(self)
+    }
+    fn exp(self) -> Value<'a> {
+        Value::exp(self)
     }
     fn max(self, other: f64) -> Value<'a> {
         Value::max(self, other)

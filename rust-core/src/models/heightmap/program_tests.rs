@@ -82,11 +82,14 @@ fn eval_programs_match_native() {
         );
         assert!(spectral.checked > 300 && rgb.checked > 300);
         // f64: the same reads, with the program's f32 constants (1 /
-        // kappa_0, the tile's length, the RGB nodes' k): measured 1.9e-6
-        // (Gaussian map) and 2.5e-5 (the grating's steep peaks, RGB); f32:
-        // the table coordinates' rounding on top, 1e-5 and 2.1e-4.
-        assert!(spectral.max_rel_f64 < 5e-5, "{}", spectral.max_rel_f64);
-        assert!(rgb.max_rel_f64 < 5e-5, "{}", rgb.max_rel_f64);
+        // kappa_0, the tile's length, the RGB nodes' k): measured 1.0e-6
+        // (Gaussian map) and 6.9e-5 (the grating's steep peaks, RGB: the
+        // geometric blend between nodes turns a shift dt of the node
+        // weight into a relative error dt ln(e1 / e0), 2.5e-5 with the
+        // linear blend before); f32: the table coordinates' rounding on
+        // top, 6.4e-6 and 3.1e-4.
+        assert!(spectral.max_rel_f64 < 1.5e-4, "{}", spectral.max_rel_f64);
+        assert!(rgb.max_rel_f64 < 1.5e-4, "{}", rgb.max_rel_f64);
         assert!(spectral.max_rel_f32 < 1e-3, "{}", spectral.max_rel_f32);
         assert!(rgb.max_rel_f32 < 1e-3, "{}", rgb.max_rel_f32);
     }

@@ -226,6 +226,62 @@ fn sine_map_orders_carry_bessel_powers() {
     assert!(worst_place < 0.1, "{worst_place}");
 }
 
+/// Between the nodes the same orders hold: each order's power summed
+/// over its cells, read at a quarter, a half and three quarters of the way
+/// between two nodes in s, against J_n(kappa b / 2)^2. The linear blend of
+/// the nodes (what the read did before) is printed for comparison: it
+/// overestimates the steep higher orders (`geometric_blend`).
+#[test]
+fn sine_map_orders_between_nodes() {
+    let (n, pixel, period, b) = (512, 0.08, 1.6, 0.12);
+    let h: Vec<f64> = (0..n * n)
+        .map(|i| 0.5 * b * (2.0 * PI * (i % n) as f64 * pixel / period).sin())
+        .collect();
+    let field = HeightField::new(n, n, h, pixel, 1.0, "sine").unwrap();
+    let table = SpectrumTable::build(&field, Some(128));
+    let tile = table.tile;
+    let fetch = |at: f64| table.values[at as usize] as f64;
+    let kappa_at = |s: f64| table.kappa0 * s.exp_m1();
+    let nu = |i: usize| (i as f64 - (tile / 2) as f64) / table.tile_um;
+    let dnu2 = 1.0 / (table.tile_um * table.tile_um);
+    // The table's value, T (1 + kappa / kappa_0)^4, at kappa.
+    let scaled = |k: f64, ix: usize, iy: usize| {
+        table.read(k, nu(ix), nu(iy), fetch) * (1.0 + k / table.kappa0).powi(4)
+    };
+    let (mut worst, mut worst_linear) = ([0.0f64; 4], [0.0f64; 4]);
+    for node in 1..table.nodes - 1 {
+        let (s0, s1) = (table.node_s(node), table.node_s(node + 1));
+        let (k0, k1) = (kappa_at(s0), kappa_at(s1));
+        for t in [0.25, 0.5, 0.75] {
+            let kappa = kappa_at(s0 + t * (s1 - s0));
+            let factor = (1.0 + kappa / table.kappa0).powi(4);
+            for order in 1..=3i32 {
+                let c = table.nu_to_grid(order as f64 / period).round() as usize;
+                let (mut power, mut linear) = (0.0, 0.0);
+                for iy in tile / 2 - 3..=tile / 2 + 3 {
+                    for ix in c - 3..=c + 3 {
+                        power += table.read(kappa, nu(ix), nu(iy), fetch);
+                        linear +=
+                            ((1.0 - t) * scaled(k0, ix, iy) + t * scaled(k1, ix, iy)) / factor;
+                    }
+                }
+                let expected = bessel_j(order, kappa * b / 2.0).powi(2);
+                if expected > 1e-4 {
+                    let o = order as usize;
+                    let rel = |got: f64| (got * kappa * kappa * dnu2 - expected).abs() / expected;
+                    worst[o] = worst[o].max(rel(power));
+                    worst_linear[o] = worst_linear[o].max(rel(linear));
+                }
+            }
+        }
+    }
+    println!(
+        "sine orders 1-3 between nodes against J_n^2: geometric blend {:.1e} {:.1e} {:.1e}; linear {:.1e} {:.1e} {:.1e}",
+        worst[1], worst[2], worst[3], worst_linear[1], worst_linear[2], worst_linear[3]
+    );
+    assert!(worst.iter().all(|&w| w < 0.01), "{worst:?}");
+}
+
 /// A sawtooth (blazed) map sends its light where each facet's mirror
 /// points: the sign of the map's x matters (a mirrored map would light
 /// the other side).
