@@ -152,6 +152,34 @@ def main():
     fig.tight_layout()
     fig.savefig(IMG / "kirchhoff_periodic.png", dpi=90)
     plt.close(fig)
+
+    # 6. Height maps: core / GT per resolved bin against its brightness.
+    maps_file = DATA / "heightmap_bins.csv"
+    if maps_file.exists():
+        maps = by_case(read("heightmap_bins.csv"))
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+        for ax, demo in zip(axes, (False, True)):
+            for name, rs in maps.items():
+                if name.startswith("demo") != demo:
+                    continue
+                peak = max(fl(r, "gt_um2") for r in rs)
+                res = [r for r in rs if r["resolved"] == "1"]
+                if not res:
+                    continue
+                x = [fl(r, "gt_um2") / peak for r in res]
+                y = [fl(r, "core_um2") / fl(r, "gt_um2") for r in res]
+                e = [fl(r, "gt_se_um2") / fl(r, "gt_um2") * yy for r, yy in zip(res, y)]
+                ax.errorbar(x, y, yerr=e, fmt="o", ms=3, capsize=2, lw=0.8, label=name)
+            ax.set_xscale("log")
+            ax.axhline(1.0, color="k", lw=0.8)
+            ax.set_ylim(0.8, 1.2)
+            ax.set_xlabel("bin / brightest bin")
+            ax.set_title("demo maps (scenes/heightmaps)" if demo else "CI maps (synthetic)", fontsize=10)
+            ax.legend(fontsize=6)
+        axes[0].set_ylabel("core / Kirchhoff over the map's tiles")
+        fig.tight_layout()
+        fig.savefig(IMG / "kirchhoff_heightmap.png", dpi=90)
+        plt.close(fig)
     print("wrote", *sorted(p.name for p in IMG.glob("kirchhoff_*.png")))
 
 

@@ -1,5 +1,6 @@
 //! The case lists: the full run (docs/kirchhoff.md) and the reduced CI run.
 
+use crate::heightmap::{GratingProfile, MapCase, MapSource};
 use crate::optics;
 use crate::periodic::{PeriodicCase, ProfileKind};
 use crate::random::{dq, gaussian_grid, linear_edges, log_edges, Binning, RandomCase};
@@ -224,4 +225,87 @@ pub fn ci_periodic() -> Vec<PeriodicCase> {
         samples_per_period: 200,
         extent: 24.0,
     }]
+}
+
+/// The height-map cases: maps the tool synthesises (written to .npy for the
+/// core), at normal and oblique incidence.
+pub fn ci_maps() -> Vec<MapCase> {
+    let gaussian = MapSource::Gaussian {
+        sigma_um: 0.05,
+        corr_um: 1.0,
+        n: 2048,
+        seed: 21,
+    };
+    let grating = |profile, period_um, depth_um, n, seed| MapSource::Grating {
+        profile,
+        period_um,
+        depth_um,
+        noise_um: 0.005,
+        noise_corr_um: 0.5,
+        n,
+        seed,
+    };
+    vec![
+        map_case(
+            "map gaussian s=0.05 T=1 th=0",
+            gaussian.clone(),
+            256,
+            0.0,
+            8,
+        ),
+        map_case("map gaussian s=0.05 T=1 th=40", gaussian, 256, 40.0, 8),
+        map_case(
+            "map sine 1.6um pp=0.12 th=0",
+            grating(GratingProfile::Sine, 1.6, 0.12, 1024, 22),
+            256,
+            0.0,
+            2,
+        ),
+        map_case(
+            "map blazed 2.56um depth=0.1 th=20",
+            grating(GratingProfile::Sawtooth, 2.56, 0.1, 512, 23),
+            128,
+            20.0,
+            2,
+        ),
+    ]
+}
+
+/// The CI maps and the demo scene's maps (scenes/heightmaps/*.npy, written
+/// by `make heightmaps`), where they exist.
+pub fn full_maps() -> Vec<MapCase> {
+    let mut v = ci_maps();
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/heightmaps");
+    for (name, block) in [
+        ("gaussian", 8),
+        ("fractal", 4),
+        ("grating", 2),
+        ("scales", 2),
+    ] {
+        let file = dir.join(format!("{name}.npy"));
+        if file.exists() {
+            for theta in [0.0, 40.0] {
+                v.push(map_case(
+                    &format!("demo map {name} th={theta}"),
+                    MapSource::Npy(file.clone()),
+                    256,
+                    theta,
+                    block,
+                ));
+            }
+        }
+    }
+    v
+}
+
+fn map_case(name: &str, source: MapSource, tile_px: usize, theta: f64, block_px: usize) -> MapCase {
+    MapCase {
+        name: name.into(),
+        source,
+        pixel_um: 0.08,
+        tile_px,
+        theta_i_deg: theta,
+        lambda0_nm: LAMBDA0_NM,
+        block_px,
+    }
 }

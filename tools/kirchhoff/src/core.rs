@@ -101,6 +101,15 @@ impl Core {
         !matches!(self, Core::Unavailable(_))
     }
 
+    /// The coherent lobe's reflectance at the mirror of wi (F^2 = 1); NaN
+    /// where only a surface kernel is at hand.
+    pub fn coherent(&self, wi: DVec3, lambda_nm: f64) -> f64 {
+        match self {
+            Core::Brdf(b) => b.coherent_spectral(wi, lambda_nm),
+            _ => f64::NAN,
+        }
+    }
+
     /// f / G with F^2 = 1 at (wi, wo, lambda).
     pub fn f_over_g(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> f64 {
         if let Core::Brdf(b) = self {

@@ -7,6 +7,7 @@
 pub mod cases;
 pub mod core;
 pub mod fft2;
+pub mod heightmap;
 pub mod optics;
 pub mod periodic;
 pub mod random;

@@ -6,7 +6,7 @@
 //! (grid steps per r_c of the fractal cases) and `--fbm-fitted-plane` (the
 //! earlier fitted completion of the fractal surfaces, for comparison).
 
-use kirchhoff::{cases, periodic, random, report};
+use kirchhoff::{cases, heightmap, periodic, random, report};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -73,6 +73,10 @@ The reduced version runs in CI: `tools/kirchhoff/tests/ground_truth.rs`.
   systematic offset; the per-bin chi2/dof is not.
   Periodic (deterministic): resolved above 1e-6 of the strongest peak; passes
   when |core/GT - 1| <= 3 x the numerical error estimate + 1e-4.
+- **Height maps** (the `heightmap` surface, docs/heightmap.md). One map is
+  one realisation, so the realisations are the map's own non-overlapping
+  Hann tiles; the tool reads, detrends and transforms the map with its own
+  code and compares per block of frequency cells (section "Height maps").
 "#;
 
 fn find_python(root: &std::path::Path) -> Option<PathBuf> {
@@ -102,14 +106,18 @@ fn main() {
         .position(|a| a == "--fbm-per-rc")
         .and_then(|i| args.get(i + 1))
         .and_then(|v| v.parse::<f64>().ok());
-    let (rcases, pcases) = if full {
+    let (rcases, pcases, mcases) = if full {
         let budget = cases::Budget {
             fbm_per_rc: per_rc.unwrap_or(cases::FULL.fbm_per_rc),
             ..cases::FULL
         };
-        (cases::full_random_with(&budget), cases::full_periodic())
+        (
+            cases::full_random_with(&budget),
+            cases::full_periodic(),
+            cases::full_maps(),
+        )
     } else {
-        (cases::ci_random(), cases::ci_periodic())
+        (cases::ci_random(), cases::ci_periodic(), cases::ci_maps())
     };
     let opt = |name: &str| {
         args.iter()
@@ -205,6 +213,35 @@ fn main() {
             Err(e) => println!("{:<36} SKIPPED: {e}", c.name),
         }
     }
+    let mut mres = Vec::new();
+    for c in mcases.iter().filter(|c| keep(&c.name)) {
+        match heightmap::run(c, 1.0) {
+            Ok(r) => {
+                let s = heightmap::summarise(&r);
+                if !s.passes() {
+                    failures += s.failed.max(1);
+                }
+                println!(
+                    "{:<36} g={:<7.3} {}x{} tiles={:<3} {:>5.1}s resolved {:>4}/{:<4} failed {} max|r-1| {:.4} median {:.4} max sig {:.2} chi2/dof {:.2} coherent {:.5} vs {:.5}",
+                    r.case.name, r.roughness, r.nx, r.ny, r.tiles, r.seconds, s.resolved, s.bins,
+                    s.failed, s.max_dev, s.median_dev, s.max_sigmas, s.chi2_dof, r.coherent_core, r.coherent_gt
+                );
+                if args.iter().any(|a| a == "--bins") {
+                    for b in &r.bins {
+                        let v = heightmap::verdict(b, r.peak);
+                        if v.resolved || std::env::var("KIRCHHOFF_ALL_BINS").is_ok() {
+                            println!(
+                                "    q=({:+8.3},{:+8.3}) lam={:<6.1} n={:<3} gt={:<11.4e} ratio={:.4} +- {:.4} res={} pass={}",
+                                b.qx, b.qy, b.lambda_nm, b.cells, b.gt, b.ratio(), b.ratio() * b.rel_err(), v.resolved as u8, v.pass as u8
+                            );
+                        }
+                    }
+                }
+                mres.push(r);
+            }
+            Err(e) => println!("{:<36} SKIPPED: {e}", c.name),
+        }
+    }
     let total = t0.elapsed().as_secs_f64();
     println!("total {total:.1} s, failed bins {failures}");
     if write {
@@ -219,7 +256,8 @@ fn main() {
         )
         .unwrap();
         std::fs::write(data.join("periodic_scan.csv"), report::scan_csv(&pres)).unwrap();
-        let mut md = report::markdown(&rres, &pres, HEADER, total);
+        std::fs::write(data.join("heightmap_bins.csv"), report::map_csv(&mres)).unwrap();
+        let mut md = report::markdown(&rres, &pres, &mres, HEADER, total);
         let notes = root.join("tools/kirchhoff/NOTES.md");
         if let Ok(extra) = std::fs::read_to_string(&notes) {
             md.push('\n');

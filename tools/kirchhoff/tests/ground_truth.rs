@@ -3,10 +3,15 @@
 //! every resolved bin, for Gaussian (isotropic, anisotropic), fractal and
 //! periodic surfaces. A core perturbed by +-10% must be rejected (the test's
 //! power). The core must also match the exact (Monte Carlo free) expectation
-//! of the estimator to 1e-3. Cases: kirchhoff::cases::ci_random / ci_periodic.
+//! of the estimator to 1e-3. Height maps (kirchhoff::heightmap): the core's
+//! `heightmap` surface, read from the tool's synthetic maps, against the
+//! Kirchhoff average over the map's own tiles: no bin beyond 4 sigma,
+//! chi2/dof at most 2, the coherent lobe within 1e-3; a core 10% off fails
+//! every map. Cases: kirchhoff::cases::ci_random / ci_periodic / ci_maps.
 
 use kirchhoff::cases;
 use kirchhoff::core::UNAVAILABLE;
+use kirchhoff::heightmap;
 use kirchhoff::periodic;
 use kirchhoff::random::{self, RandomResult};
 use kirchhoff::report;
@@ -153,6 +158,67 @@ fn a_core_off_by_ten_percent_is_rejected() {
             assert!(
                 failed > 0 && failed * 2 >= resolved,
                 "{name}: core x {scale} passed ({failed} of {resolved} resolved bins failed)"
+            );
+        }
+    }
+}
+
+/// The CI maps' comparisons, made once per test process (both map tests
+/// read them; a scaled core is the same comparison with its values scaled).
+fn map_results() -> &'static [heightmap::MapResult] {
+    static RESULTS: std::sync::OnceLock<Vec<heightmap::MapResult>> = std::sync::OnceLock::new();
+    RESULTS.get_or_init(|| {
+        cases::ci_maps()
+            .iter()
+            .map(|c| heightmap::run(c, 1.0).unwrap_or_else(|e| panic!("{e}")))
+            .collect()
+    })
+}
+
+/// (name, resolved bins, whether the case passes) of each CI map, with the
+/// core scaled by `scale`.
+fn run_maps(scale: f64) -> Vec<(String, usize, bool)> {
+    map_results()
+        .iter()
+        .map(|r| {
+            let mut r = r.clone();
+            r.bins.iter_mut().for_each(|b| b.core *= scale);
+            let s = heightmap::summarise(&r);
+            println!(
+                "{} (core x {scale}): resolved {}, failed {}, max |ratio - 1| {:.4}, chi2/dof {:.2}, coherent {:.6} vs {:.6}",
+                r.case.name, s.resolved, s.failed, s.max_dev, s.chi2_dof, r.coherent_core, r.coherent_gt
+            );
+            if scale == 1.0 {
+                let d = r.coherent_core / r.coherent_gt - 1.0;
+                assert!(d.abs() < 1e-3, "{}: coherent lobe off by {d}", r.case.name);
+            }
+            (r.case.name.clone(), s.resolved, s.passes())
+        })
+        .collect()
+}
+
+#[test]
+fn height_maps_agree_with_their_kirchhoff_average() {
+    let mut bad = Vec::new();
+    for (name, resolved, passes) in run_maps(1.0) {
+        assert!(
+            resolved >= MIN_RESOLVED,
+            "{name}: only {resolved} resolved bins"
+        );
+        if !passes {
+            bad.push(name);
+        }
+    }
+    assert!(bad.is_empty(), "disagree: {}", bad.join(", "));
+}
+
+#[test]
+fn a_height_map_core_off_by_ten_percent_is_rejected() {
+    for scale in [1.1, 0.9] {
+        for (name, resolved, passes) in run_maps(scale) {
+            assert!(
+                !passes,
+                "{name}: core x {scale} passed ({resolved} resolved bins)"
             );
         }
     }
