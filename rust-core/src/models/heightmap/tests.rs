@@ -176,18 +176,24 @@ fn bessel_j(n: i32, x: f64) -> f64 {
         / m as f64
 }
 
+/// The tables (128-px tiles) of a 512^2 sine map along x, with its period
+/// and peak-to-peak height (um).
+fn sine_map_table() -> (SpectrumTable, f64, f64) {
+    let (n, pixel, period, b) = (512, 0.08, 1.6, 0.12);
+    let h: Vec<f64> = (0..n * n)
+        .map(|i| 0.5 * b * (2.0 * PI * (i % n) as f64 * pixel / period).sin())
+        .collect();
+    let field = HeightField::new(n, n, h, pixel, 1.0, "sine").unwrap();
+    (SpectrumTable::build(&field, Some(128)), period, b)
+}
+
 /// A sine grating of peak-to-peak height b: order n carries J_n(kappa b /
 /// 2)^2 of the light (the periodic model's formula for the sine profile),
 /// order 0 the coherent lobe's |chi|^2 = J_0^2, and each order sits at nu
 /// = n / period.
 #[test]
 fn sine_map_orders_carry_bessel_powers() {
-    let (n, pixel, period, b) = (512, 0.08, 1.6, 0.12);
-    let h: Vec<f64> = (0..n * n)
-        .map(|i| 0.5 * b * (2.0 * PI * (i % n) as f64 * pixel / period).sin())
-        .collect();
-    let field = HeightField::new(n, n, h, pixel, 1.0, "sine").unwrap();
-    let table = SpectrumTable::build(&field, Some(128));
+    let (table, period, b) = sine_map_table();
     let tile = table.tile;
     let cells = tile * tile;
     let dnu2 = 1.0 / (table.tile_um * table.tile_um);
@@ -233,12 +239,7 @@ fn sine_map_orders_carry_bessel_powers() {
 /// overestimates the steep higher orders (`geometric_blend`).
 #[test]
 fn sine_map_orders_between_nodes() {
-    let (n, pixel, period, b) = (512, 0.08, 1.6, 0.12);
-    let h: Vec<f64> = (0..n * n)
-        .map(|i| 0.5 * b * (2.0 * PI * (i % n) as f64 * pixel / period).sin())
-        .collect();
-    let field = HeightField::new(n, n, h, pixel, 1.0, "sine").unwrap();
-    let table = SpectrumTable::build(&field, Some(128));
+    let (table, period, b) = sine_map_table();
     let tile = table.tile;
     let fetch = |at: f64| table.values[at as usize] as f64;
     let kappa_at = |s: f64| table.kappa0 * s.exp_m1();
