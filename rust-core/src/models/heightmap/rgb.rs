@@ -337,6 +337,9 @@ impl RgbTable {
             let at = base + c as f64;
             let cell = |at: R| bilinear(&fetch, at, 3.0, row, tx, ty);
             let (e0, e1) = (cell(at), cell(at + plane));
+            // Linear in |w| (T's own nodes blend geometrically): a
+            // geometric blend here moved the demo maps' checks by at most
+            // 0.008 and would cost three blends per read.
             let e = e0 + (e1 - e0) * tw;
             R::select(inside, e * inv_a4, u.constant(0.0))
         })

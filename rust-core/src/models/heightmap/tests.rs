@@ -1211,3 +1211,34 @@ fn direct_kirchhoff_sums_match_the_tables() {
     // (1 / 7 per cell here).
     assert!(median < 0.04 && worst < 0.15, "{median} {worst}");
 }
+
+/// The demo maps' RGB tables (`make heightmaps` first; gold): shape,
+/// memory, build time and check, as docs/heightmap.md's table lists them.
+#[test]
+#[ignore]
+fn demo_maps_rgb_survey() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/heightmaps");
+    for name in ["gaussian", "fractal", "grating", "scales"] {
+        let file = dir.join(format!("{name}.npy"));
+        if !file.exists() {
+            println!("{name}: no {} (run `make heightmaps`)", file.display());
+            continue;
+        }
+        let brdf = material(&map_json(&file, r#","fresnel":"gold""#));
+        let map = brdf.surface().height_map().expect("a height map");
+        let (rule, fresnel) = (brdf.rgb_rule(), brdf.fresnel());
+        let start = std::time::Instant::now();
+        let rgb = RgbTable::build(map.table(), rule, fresnel);
+        let build_s = start.elapsed().as_secs_f64();
+        let check = rgb.check_p90(map.table(), rule, fresnel, None);
+        let start = std::time::Instant::now();
+        let serves = RgbTable::build_checked(map.table(), rule, fresnel).is_some();
+        println!(
+            "{name}: RGB table {:?}, {:.1} MB in {build_s:.2} s; check p90 {check:.3}; build_checked {} in {:.2} s",
+            rgb.shape(),
+            rgb.memory_bytes() as f64 / 1e6,
+            if serves { "serves" } else { "refuses" },
+            start.elapsed().as_secs_f64()
+        );
+    }
+}
