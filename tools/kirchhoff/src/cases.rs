@@ -1,6 +1,6 @@
 //! The case lists: the full run (docs/kirchhoff.md) and the reduced CI run.
 
-use crate::heightmap::{GratingProfile, MapCase, MapSource};
+use crate::heightmap::{GratingProfile, MapBins, MapCase, MapSource};
 use crate::optics;
 use crate::periodic::{PeriodicCase, ProfileKind};
 use crate::random::{dq, gaussian_grid, linear_edges, log_edges, Binning, RandomCase};
@@ -251,22 +251,28 @@ pub fn ci_maps() -> Vec<MapCase> {
             gaussian.clone(),
             256,
             0.0,
-            8,
+            MapBins::Rings(1),
         ),
-        map_case("map gaussian s=0.05 T=1 th=40", gaussian, 256, 40.0, 8),
+        map_case(
+            "map gaussian s=0.05 T=1 th=40",
+            gaussian,
+            256,
+            40.0,
+            MapBins::Rings(1),
+        ),
         map_case(
             "map sine 1.6um pp=0.12 th=0",
             grating(GratingProfile::Sine, 1.6, 0.12, 1024, 22),
             256,
             0.0,
-            2,
+            MapBins::Blocks(2),
         ),
         map_case(
             "map blazed 2.56um depth=0.1 th=20",
             grating(GratingProfile::Sawtooth, 2.56, 0.1, 512, 23),
             128,
             20.0,
-            2,
+            MapBins::Blocks(2),
         ),
     ]
 }
@@ -276,11 +282,11 @@ pub fn ci_maps() -> Vec<MapCase> {
 pub fn full_maps() -> Vec<MapCase> {
     let mut v = ci_maps();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/heightmaps");
-    for (name, block) in [
-        ("gaussian", 8),
-        ("fractal", 4),
-        ("grating", 2),
-        ("scales", 2),
+    for (name, bins) in [
+        ("gaussian", MapBins::Rings(1)),
+        ("fractal", MapBins::Rings(2)),
+        ("grating", MapBins::Blocks(2)),
+        ("scales", MapBins::Blocks(2)),
     ] {
         let file = dir.join(format!("{name}.npy"));
         if file.exists() {
@@ -290,7 +296,7 @@ pub fn full_maps() -> Vec<MapCase> {
                     MapSource::Npy(file.clone()),
                     256,
                     theta,
-                    block,
+                    bins,
                 ));
             }
         }
@@ -298,7 +304,7 @@ pub fn full_maps() -> Vec<MapCase> {
     v
 }
 
-fn map_case(name: &str, source: MapSource, tile_px: usize, theta: f64, block_px: usize) -> MapCase {
+fn map_case(name: &str, source: MapSource, tile_px: usize, theta: f64, bins: MapBins) -> MapCase {
     MapCase {
         name: name.into(),
         source,
@@ -306,6 +312,6 @@ fn map_case(name: &str, source: MapSource, tile_px: usize, theta: f64, block_px:
         tile_px,
         theta_i_deg: theta,
         lambda0_nm: LAMBDA0_NM,
-        block_px,
+        bins,
     }
 }

@@ -7,8 +7,8 @@
 //! with c the map's mean of exp(i a h) (the coherent field, compared on its
 //! own), and P(q) = dx^2 sum_x p(x) exp(i q . x): the physical sign, the
 //! phase of k (u, v, w) . (x, y, h) with (u, v, w) = -(wi + wo). Then
-//! |P|^2 / A with A = dx^2 sum W^2, summed over blocks of cells, and the
-//! blocks' mean and standard error over the tiles.
+//! |P|^2 / A with A = dx^2 sum W^2, summed over bins of cells
+//! (`MapBins`), and the bins' mean and standard error over the tiles.
 //!
 //! The core is evaluated at exactly those cells: for each cell's q and the
 //! case's a = k w, `optics::solve_pair` gives (wo, lambda), and the core's
@@ -78,8 +78,17 @@ pub struct MapCase {
     pub tile_px: usize,
     pub theta_i_deg: f64,
     pub lambda0_nm: f64,
-    /// A bin is a block of block_px x block_px frequency cells.
-    pub block_px: usize,
+    pub bins: MapBins,
+}
+
+/// How a case groups the tile's frequency cells.
+#[derive(Clone, Copy, Debug)]
+pub enum MapBins {
+    /// Blocks of n x n cells: any map.
+    Blocks(usize),
+    /// Rings n cells wide about the mirror: isotropic maps, whose lobe
+    /// spreads over many faint cells that a ring gathers.
+    Rings(usize),
 }
 
 #[derive(Clone, Debug, Default)]
@@ -203,8 +212,9 @@ pub fn summarise(r: &MapResult) -> MapSummary {
 }
 
 /// Largest chi2/dof over a case's resolved bins for it to pass: measured
-/// 0.1-1.1 on the CI maps and 0.1-1.7 on the demo maps (the correlated
-/// bins of a lattice's peaks the highest); a core 10% off gives 4-100.
+/// 0.08-0.95 on the CI maps and 0.43-1.72 on the demo maps (the
+/// correlated bins of a lattice's peaks the highest); a core 10% off gives
+/// 11.7-340.
 pub const MAX_CHI2_DOF: f64 = 2.0;
 
 impl MapSummary {
@@ -249,15 +259,14 @@ pub fn run(case: &MapCase, core_scale: f64) -> Result<MapResult, String> {
         .collect();
     let c = p.iter().sum::<Complex64>() / p.len() as f64;
 
-    // Cells -> bins: blocks of signed frequency indices, the DC cell and
-    // cells without a physical pair left out.
+    // Cells -> bins: blocks or rings of signed frequency indices, the DC
+    // cell and cells without a physical pair left out.
     let dx = case.pixel_um;
     let grid = Grid {
         nx: tile,
         ny: tile,
         dx,
     };
-    let block = case.block_px as i64;
     let mut bin_of_cell = vec![usize::MAX; tile * tile];
     let mut bin_index = std::collections::HashMap::new();
     let mut cells: Vec<Vec<(optics::Pair, f64, f64)>> = Vec::new();
@@ -271,7 +280,10 @@ pub fn run(case: &MapCase, core_scale: f64) -> Result<MapResult, String> {
             let Some(pair) = optics::solve_pair(wi, a, qx, qy) else {
                 continue;
             };
-            let key = (sx.div_euclid(block), sy.div_euclid(block));
+            let key = match case.bins {
+                MapBins::Blocks(n) => (sx.div_euclid(n as i64), sy.div_euclid(n as i64)),
+                MapBins::Rings(n) => (((sx * sx + sy * sy) as f64).sqrt() as i64 / n as i64, 0),
+            };
             let b = *bin_index.entry(key).or_insert_with(|| {
                 cells.push(Vec::new());
                 cells.len() - 1

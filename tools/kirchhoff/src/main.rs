@@ -76,7 +76,7 @@ The reduced version runs in CI: `tools/kirchhoff/tests/ground_truth.rs`.
 - **Height maps** (the `heightmap` surface, docs/heightmap.md). One map is
   one realisation, so the realisations are the map's own non-overlapping
   Hann tiles; the tool reads, detrends and transforms the map with its own
-  code and compares per block of frequency cells (section "Height maps").
+  code and compares per bin of frequency cells (rings or blocks) (section "Height maps").
 "#;
 
 fn find_python(root: &std::path::Path) -> Option<PathBuf> {
