@@ -197,8 +197,8 @@ impl SpectrumTable {
     }
 
     /// T at (kappa, nu): geometric in s = ln(1 + kappa / kappa_0) between
-    /// nodes (`geometric_blend`), bilinear in nu on the frequency grid (8 fetches), 0 beyond
-    /// the grid's Nyquist frequency.
+    /// nodes (`geometric_blend`), bilinear in nu on the frequency grid (8
+    /// fetches), 0 beyond the grid's Nyquist frequency.
     #[inline]
     pub(crate) fn read<R: Real>(&self, kappa: R, nu_x: R, nu_y: R, fetch: impl Fn(R) -> R) -> R {
         let (a, i, t) = self.place_in_s(kappa, self.nodes);
