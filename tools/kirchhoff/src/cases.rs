@@ -245,21 +245,14 @@ pub fn ci_maps() -> Vec<MapCase> {
         n,
         seed,
     };
-    vec![
-        map_case(
-            "map gaussian s=0.05 T=1 th=0",
-            gaussian.clone(),
-            256,
-            0.0,
-            MapBins::Rings(1),
-        ),
-        map_case(
-            "map gaussian s=0.05 T=1 th=40",
-            gaussian,
-            256,
-            40.0,
-            MapBins::Rings(1),
-        ),
+    let mut v: Vec<MapCase> = [0.0, 40.0]
+        .into_iter()
+        .map(|theta| {
+            let name = format!("map gaussian s=0.05 T=1 th={theta}");
+            map_case(&name, gaussian.clone(), 256, theta, MapBins::Rings(1))
+        })
+        .collect();
+    v.extend([
         map_case(
             "map sine 1.6um pp=0.12 th=0",
             grating(GratingProfile::Sine, 1.6, 0.12, 1024, 22),
@@ -274,7 +267,8 @@ pub fn ci_maps() -> Vec<MapCase> {
             20.0,
             MapBins::Blocks(2),
         ),
-    ]
+    ]);
+    v
 }
 
 /// The CI maps and the demo scene's maps (scenes/heightmaps/*.npy, written

@@ -28,6 +28,7 @@
 use crate::core::Core;
 use crate::fft2::Fft2;
 use crate::optics;
+use crate::report::Summary;
 use crate::rng::Rng;
 use crate::synth::{Grid, RandomModel, Synth};
 use num_complex::Complex64;
@@ -163,52 +164,17 @@ pub fn verdict(bin: &MapBin, peak: f64) -> MapVerdict {
     }
 }
 
-/// A case's figures over its resolved bins.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct MapSummary {
-    pub bins: usize,
-    pub resolved: usize,
-    pub failed: usize,
-    pub max_dev: f64,
-    pub max_sigmas: f64,
-    /// mean of ((ratio - 1) / rel_err)^2: about 0.7 for the shared data
-    /// (module docs), 1 for independent estimates.
-    pub chi2_dof: f64,
-    pub within1: f64,
-    pub within2: f64,
-    pub median_dev: f64,
-}
-
-pub fn summarise(r: &MapResult) -> MapSummary {
-    let mut s = MapSummary {
-        bins: r.bins.len(),
-        ..Default::default()
-    };
-    let mut devs = Vec::new();
+/// A case's figures over its resolved bins. chi2/dof is about 0.7 for
+/// the shared data (module docs), 1 for independent estimates.
+pub fn summarise(r: &MapResult) -> Summary {
+    let mut s = Summary::new(r.bins.len(), true);
     for b in &r.bins {
         let v = verdict(b, r.peak);
-        if !v.resolved {
-            continue;
+        if v.resolved {
+            s.add((b.ratio() - 1.0).abs(), v.sigmas, v.pass);
         }
-        s.resolved += 1;
-        s.failed += (!v.pass) as usize;
-        let dev = (b.ratio() - 1.0).abs();
-        devs.push(dev);
-        s.max_dev = s.max_dev.max(dev);
-        s.max_sigmas = s.max_sigmas.max(v.sigmas);
-        s.chi2_dof += v.sigmas * v.sigmas;
-        s.within1 += (v.sigmas <= 1.0) as usize as f64;
-        s.within2 += (v.sigmas <= 2.0) as usize as f64;
     }
-    if s.resolved > 0 {
-        let n = s.resolved as f64;
-        s.chi2_dof /= n;
-        s.within1 /= n;
-        s.within2 /= n;
-        devs.sort_by(f64::total_cmp);
-        s.median_dev = devs[devs.len() / 2];
-    }
-    s
+    s.finish()
 }
 
 /// Largest chi2/dof over a case's resolved bins for it to pass: measured
@@ -217,11 +183,10 @@ pub fn summarise(r: &MapResult) -> MapSummary {
 /// 11.7-340.
 pub const MAX_CHI2_DOF: f64 = 2.0;
 
-impl MapSummary {
-    /// No resolved bin beyond N_SIGMA and chi2/dof at most MAX_CHI2_DOF.
-    pub fn passes(&self) -> bool {
-        self.failed == 0 && self.chi2_dof <= MAX_CHI2_DOF
-    }
+/// A map case passes: no resolved bin beyond N_SIGMA and chi2/dof at
+/// most MAX_CHI2_DOF.
+pub fn passes(s: &Summary) -> bool {
+    s.failed == 0 && s.chi2_dof <= MAX_CHI2_DOF
 }
 
 /// The core's material for a case's map file.

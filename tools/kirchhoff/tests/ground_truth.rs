@@ -192,7 +192,7 @@ fn run_maps(scale: f64) -> Vec<(String, usize, bool)> {
                 let d = r.coherent_core / r.coherent_gt - 1.0;
                 assert!(d.abs() < 1e-3, "{}: coherent lobe off by {d}", r.case.name);
             }
-            (r.case.name.clone(), s.resolved, s.passes())
+            (r.case.name.clone(), s.resolved, heightmap::passes(&s))
         })
         .collect()
 }
