@@ -69,6 +69,12 @@ fuzz_target!(|data: &[u8]| {
             assert!(q.is_finite() && if has == 1 { (q - 1.0).abs() < 1e-4 } else { q == 0.0 });
         }
         assert_eq!(stam_brdf_export_polarization_program(p, std::ptr::null_mut(), 0) > 0, has == 1);
+        let mut mm = vec![0f32; 22 * n];
+        let has_m = stam_brdf_mueller(p, n, wo.as_ptr(), wi.as_ptr(), lam.as_ptr(), mm.as_mut_ptr());
+        for m in mm.chunks_exact(22) {
+            assert!(m.iter().all(|x| x.is_finite()));
+            assert!(if has_m == 1 { (m[0] - 1.0).abs() < 1e-5 } else { m.iter().all(|&x| x == 0.0) });
+        }
         for lam_ptr in [lam.as_ptr(), std::ptr::null()] {
             stam_brdf_sample(p, n, wi.as_ptr(), lam_ptr, rnd.as_ptr(), out.as_mut_ptr(), pdf.as_mut_ptr(), coh.as_mut_ptr());
             assert!(ok(&pdf));

@@ -208,6 +208,7 @@ def lib():
         'stam_brdf_eval_spectral': (None, [vp, sz, fp, fp, fp, fp]),
         'stam_brdf_eval_rgb': (None, [vp, sz, fp, fp, fp]),
         'stam_brdf_polarization': (ctypes.c_int, [vp, sz, fp, fp, fp, fp]),
+        'stam_brdf_mueller': (ctypes.c_int, [vp, sz, fp, fp, fp, fp]),
         'stam_brdf_coherent_spectral': (None, [vp, sz, fp, fp, fp]),
         'stam_brdf_coherent_rgb': (None, [vp, sz, fp, fp]),
         'stam_brdf_sample': (None, [vp, sz, fp, fp, fp, fp, fp, u8p]),
@@ -437,7 +438,7 @@ class Brdf:
         matrix over the unpolarised value, [[1, b, 0, 0], [b, 1, 0, 0],
         [0, 0, c, s], [0, 0, -s, c]] in the conventions of Mitsuba's
         mueller.specular_reflection; None for a material without one
-        (rigorous gratings)."""
+        (rigorous gratings: see `mueller`)."""
         wi, wo = _vectors(wi, 'wi'), _vectors(wo, 'wo')
         lam = np.asarray(lambda_nm, dtype=np.float64)
         shape, n = self._batch(wi.shape[:-1], wo.shape[:-1], lam.shape)
@@ -448,6 +449,27 @@ class Brdf:
         if not has and n:
             return None
         return out.astype(np.float64).reshape(shape + (3,))
+
+    def mueller(self, light_from, light_to, lambda_nm):
+        """The Mueller matrix of the reflection of light arriving from
+        `light_from` and leaving along `light_to` at lambda
+        (stam_brdf_mueller): (matrix over its [0][0], shape (..., 4, 4);
+        Stokes basis vector of the incident direction of travel
+        -light_from, (..., 3); that of light_to, (..., 3)), in Mitsuba's
+        conventions (the second axis of a basis is d x the first). None for
+        a material without one (a rigorous grating with a cover)."""
+        wi, wo = _vectors(light_from, 'light_from'), _vectors(light_to, 'light_to')
+        lam = np.asarray(lambda_nm, dtype=np.float64)
+        shape, n = self._batch(wi.shape[:-1], wo.shape[:-1], lam.shape)
+        out = np.zeros((n, 22), np.float32)
+        has = self._lib.stam_brdf_mueller(
+            self._handle(), n, _ptr(self._lanes(wi, shape, n, (3,))),
+            _ptr(self._lanes(wo, shape, n, (3,))), _ptr(self._lanes(lam, shape, n)), _ptr(out))
+        if not has and n:
+            return None
+        out = out.astype(np.float64)
+        return (out[:, :16].reshape(shape + (4, 4)), out[:, 16:19].reshape(shape + (3,)),
+                out[:, 19:].reshape(shape + (3,)))
 
     def coherent_rgb(self, wi):
         """Reflectance of the coherent (mirror) delta lobe in linear sRGB: (..., 3)."""

@@ -60,10 +60,28 @@ void stam_brdf_eval_rgb(const StamBrdf *b, size_t n, const float *wi, const floa
  * value is F^2 G K give the Fresnel reflection's at the half vector (a
  * constant reflectance: a perfect conductor's, (0, -1, 0)). Returns 1; 0
  * with out zero-filled for a NULL argument or a material without such a
- * polarisation (rigorous gratings, whose orders' polarisation is not
- * exported yet). */
+ * polarisation (rigorous gratings: see stam_brdf_mueller). */
 int stam_brdf_polarization(const StamBrdf *b, size_t n, const float *wi, const float *wo,
                            const float *lambda_nm, float *out);
+
+/* The Mueller matrix of the reflection of light arriving from `from` and
+ * leaving along `to` (unit directions in the material's frame, one
+ * wavelength per pair), 22 floats per pair: the 4x4 matrix over its [0][0]
+ * (the unpolarised value), row-major, then the Stokes basis vector (3) of
+ * the incident direction of travel -from and that of `to`. Each basis
+ * vector is perpendicular to its direction; the second axis of a basis is
+ * d x (the first), the conventions of Mitsuba's mueller.h, so a host rotates
+ * the matrix into its own bases (mueller::rotate_mueller_basis). Surfaces
+ * whose value is F^2 G K: stam_brdf_polarization's matrix, its bases normal
+ * to the plane of reflection on the half vector. Rigorous gratings: each
+ * order's matrix from the solver's complex amplitudes, mixed over the
+ * orders as f mixes them, in bases tied to the grooves (y x d); the first
+ * call builds the grating's polarised table (seconds, progress on stderr,
+ * cached on disk). Returns 1; 0 with out zero-filled for a NULL argument
+ * or a material without a matrix (a rigorous grating with a cover). No JIT
+ * program yet: JIT hosts depolarize rigorous gratings. */
+int stam_brdf_mueller(const StamBrdf *b, size_t n, const float *from, const float *to,
+                      const float *lambda_nm, float *out);
 
 /* Reflectance of the coherent (mirror) delta lobe: F^2 exp(-g) for Gaussian
  * surfaces, 0 otherwise. */

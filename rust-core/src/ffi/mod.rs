@@ -311,6 +311,54 @@ pub unsafe extern "C" fn stam_brdf_polarization(
     polarizes as i32
 }
 
+/// # Safety
+/// from, to hold 3n floats, lambda_nm n, out 22n; `b` NULL or valid.
+#[no_mangle]
+pub unsafe extern "C" fn stam_brdf_mueller(
+    b: *const StamBrdf,
+    n: usize,
+    from: *const f32,
+    to: *const f32,
+    lambda_nm: *const f32,
+    out: *mut f32,
+) -> i32 {
+    // A material without a Mueller matrix, or an input missing: zeros, and 0
+    let has = !from.is_null()
+        && !to.is_null()
+        && !lambda_nm.is_null()
+        && !out.is_null()
+        && !b.is_null()
+        && (*b).brdf.has_mueller();
+    batch(b, n, out, STAM_MUELLER_FLOATS, has, |brdf, i, o| {
+        let lambda = *lambda_nm.add(i) as f64;
+        let (from, to) = (direction(from, i), direction(to, i));
+        // Directions the core cannot take (zero, not finite): a depolarizer.
+        let (m, bases) = brdf
+            .mueller(from, to, lambda)
+            .filter(|(m, bases)| {
+                m.iter().all(|v| v.is_finite()) && bases.iter().all(|b| b.is_finite())
+            })
+            .unwrap_or((
+                [
+                    1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                ],
+                [DVec3::X, DVec3::X],
+            ));
+        for (o, v) in o.iter_mut().zip(
+            m.iter()
+                .copied()
+                .chain(bases[0].to_array())
+                .chain(bases[1].to_array()),
+        ) {
+            *o = if v.is_finite() { v as f32 } else { 0.0 };
+        }
+    });
+    has as i32
+}
+
+/// Floats per entry of `stam_brdf_mueller`: the matrix, then two bases.
+const STAM_MUELLER_FLOATS: usize = 22;
+
 #[inline]
 unsafe fn optional_lambda(lambda_nm: *const f32, i: usize) -> Option<f64> {
     if lambda_nm.is_null() {

@@ -261,8 +261,8 @@ impl Brdf {
     /// Fresnel reflection's at the pair's half vector
     /// (`Fresnel::polarization`), (b, c, s) of its Mueller matrix over the
     /// unpolarised value, in Mitsuba's conventions. None for a model whose
-    /// f is its own (rigorous gratings: the polarisation of their orders
-    /// is not exported yet). A pair without a geometry (a direction below
+    /// f is its own (rigorous gratings: their orders' matrices are
+    /// `mueller`'s). A pair without a geometry (a direction below
     /// the horizon, where f is 0) takes normal incidence's.
     pub fn polarization(&self, wi: DVec3, wo: DVec3, lambda_nm: f64) -> Option<[f64; 3]> {
         if !self.polarizes() {
@@ -270,6 +270,58 @@ impl Brdf {
         }
         let cos_half = PairGeometry::new(wi, wo).map_or(1.0, |g| g.cos_half);
         Some(self.fresnel.polarization(cos_half, lambda_nm))
+    }
+
+    /// Whether `mueller` gives matrices (all but rigorous gratings with a
+    /// cover).
+    pub fn has_mueller(&self) -> bool {
+        if self.surface.is_unfactored() {
+            return self.surface.has_unfactored_mueller();
+        }
+        self.polarizes()
+    }
+
+    /// The Mueller matrix of the reflection of light arriving from `from`
+    /// and leaving along `to` at `lambda_nm`, over its [0][0] (which is the
+    /// unpolarised value), and the Stokes basis vectors it is given in: of
+    /// the incident direction of travel -from and of `to`, each
+    /// perpendicular to its direction, the second basis vector of each
+    /// being d x (the first) (Mitsuba's conventions). Surfaces whose value
+    /// is F^2 G K: `polarization`'s matrix, its bases normal to the plane of
+    /// reflection on the half vector h (h x -from, h x to, normalised; any
+    /// perpendicular axis where that plane is undefined). Rigorous
+    /// gratings: their orders' matrices from the solver's amplitudes, in
+    /// bases tied to the grooves (`Periodic::rigorous_mueller`). None for a
+    /// rigorous grating with a cover, and for directions that are zero or
+    /// not finite.
+    pub fn mueller(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        lambda_nm: f64,
+    ) -> Option<([f64; 16], [DVec3; 2])> {
+        // Directions the core cannot take (zero, not finite): none.
+        let (from, to) = (from.normalize_or_zero(), to.normalize_or_zero());
+        if from == DVec3::ZERO || to == DVec3::ZERO || !lambda_nm.is_finite() {
+            return None;
+        }
+        if self.surface.is_unfactored() {
+            return self.surface.unfactored_mueller(from, to, lambda_nm);
+        }
+        let [b, c, s] = self.polarization(from, to, lambda_nm)?;
+        let m = [
+            1.0, b, 0.0, 0.0, b, 1.0, 0.0, 0.0, 0.0, 0.0, c, s, 0.0, 0.0, -s, c,
+        ];
+        let h = (from + to).normalize_or_zero();
+        let axis = |d: DVec3| {
+            let a = h.cross(d);
+            if a.length_squared() > 1e-24 {
+                a.normalize()
+            } else {
+                d.any_orthonormal_vector()
+            }
+        };
+        Some((m, [axis(-from), axis(to)]))
     }
 
     /// f(wi, wo; lambda) in 1/sr without the coherent lobe and without cos.

@@ -192,6 +192,25 @@ pub trait SurfaceModel: Sized + SurfacePrograms {
         None
     }
 
+    /// Whether `unfactored_mueller` gives matrices (without building what
+    /// they need).
+    fn has_unfactored_mueller(&self) -> bool {
+        false
+    }
+
+    /// Where `is_unfactored`, the model's own Mueller matrix for light
+    /// arriving from `from` and leaving along `to`, over its [0][0], with
+    /// the Stokes basis vectors of the directions of travel -from and to
+    /// (`Brdf::mueller`); None where it has none.
+    fn unfactored_mueller(
+        &self,
+        _from: DVec3,
+        _to: DVec3,
+        _lambda_nm: f64,
+    ) -> Option<([f64; 16], [DVec3; 2])> {
+        None
+    }
+
     /// Reflectance of the coherent (mirror) lobe at incidence cosine cos_i
     /// (above the horizon) and an in-band wavelength; 0 for models without.
     fn coherent_spectral(&self, _shading: &Shading, _cos_i: f64, _lambda_nm: f64) -> f64 {
@@ -401,6 +420,19 @@ impl Surface {
 
     pub fn unfactored_rgb(&self, geom: &PairGeometry) -> Option<[f64; 3]> {
         dispatch!(self, Surface, m => m.unfactored_rgb(geom))
+    }
+
+    pub fn has_unfactored_mueller(&self) -> bool {
+        dispatch!(self, Surface, m => m.has_unfactored_mueller())
+    }
+
+    pub fn unfactored_mueller(
+        &self,
+        from: DVec3,
+        to: DVec3,
+        lambda_nm: f64,
+    ) -> Option<([f64; 16], [DVec3; 2])> {
+        dispatch!(self, Surface, m => m.unfactored_mueller(from, to, lambda_nm))
     }
 
     /// The model's programs (`program::SurfacePrograms`).

@@ -4,14 +4,18 @@
 //!
 //! Knows no renderer. `layers` turns a grating profile into lamellar layers;
 //! `solver` solves Maxwell's equations for them and returns every propagating
-//! order's efficiency and Jones matrix. See `docs/rigorous.md` for the
+//! order's efficiency and Jones matrix; `polarisation` turns the Jones
+//! matrices into Mueller matrices a table can hold. See `docs/rigorous.md` for the
 //! method, its references and its measured convergence and accuracy.
 
 pub mod layers;
+pub mod polarisation;
 pub mod request;
 pub mod solver;
 pub mod table;
 
+#[cfg(test)]
+mod polarisation_tests;
 #[cfg(test)]
 mod tests;
 

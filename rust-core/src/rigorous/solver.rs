@@ -683,7 +683,7 @@ pub fn solve_with(
 
 /// s and p unit vectors of a direction k (s = z x k normalised, p = s x k),
 /// with s along the grooves (y) when k is along z.
-fn basis(k: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+pub(super) fn basis(k: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let kt = (k[0] * k[0] + k[1] * k[1]).sqrt();
     let s = if kt > 1e-12 {
         [-k[1] / kt, k[0] / kt, 0.0]

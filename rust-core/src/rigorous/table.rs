@@ -20,21 +20,23 @@
 //! a ky shifted so that the query's nearby anomalies land on the same
 //! orders' anomalies in that row (`EfficiencyTable::locate`).
 
-use std::collections::HashMap;
-use std::io::{Read, Write};
-use std::path::PathBuf;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::Mutex;
 
 use super::layers::{Grating, Medium};
+use super::polarisation::{self, Mueller};
+
+mod cache;
 use super::solver::{prepare, Factorisation};
 use crate::optics::profile::Profile;
 use crate::progress::Progress;
 use crate::StamError;
+pub use cache::{cache_dir, table, table_from_disk};
 
 /// Bump when the solver's results or the table's layout change: it keys the
 /// on-disk cache. 3: tables built on threads that flush subnormals (a
-/// Mitsuba scene's loading) were wrong before float_env.rs.
-pub const SOLVER_VERSION: u32 = 3;
+/// Mitsuba scene's loading) were wrong before float_env.rs. 4: polarised
+/// tables (Mueller matrices, odd blocks over ky).
+pub const SOLVER_VERSION: u32 = 4;
 
 /// The grid of a table and the solver's truncation.
 #[derive(Clone, Debug, PartialEq)]
@@ -57,6 +59,9 @@ pub struct TableSpec {
     pub orders: usize,
     /// Index of the incidence medium.
     pub cover_eta: f64,
+    /// Whether the table also holds each order's Mueller matrix (16 times
+    /// the memory; `EfficiencyTable::mueller`): polarised renders.
+    pub polarised: bool,
 }
 
 /// One (wavelength, kx) row: efficiencies at ky nodes.
@@ -74,6 +79,9 @@ struct Row {
     ky: Vec<f64>,
     /// [node][m - m_min].
     values: Vec<f32>,
+    /// [node][m - m_min][16]: each order's Mueller matrix in the groove
+    /// bases (`polarisation`), where the spec is polarised; else empty.
+    mueller: Vec<f32>,
     /// The row's lambda / Lam and kx (as solved), which every lookup reads.
     step: f64,
     kx: f64,
@@ -125,6 +133,7 @@ impl Row {
             rising: Vec::new(),
             ky: vec![0.0],
             values: Vec::new(),
+            mueller: Vec::new(),
             step,
             kx,
         };
@@ -152,16 +161,12 @@ impl Row {
         row
     }
 
-    /// Where ky^2 = `y2` falls: the first of four nodes and their weights,
-    /// cubic in the nodes' parameter u (ky^2 = a + (b - a)(1 - cos pi u) / 2
-    /// within a gap (a, b)), in which a square root at an anomaly is a
-    /// straight line. The four nodes stay within the gap (where the
-    /// efficiencies are smooth in u); a gap of fewer intervals is read
-    /// quadratically or linearly.
-    fn place(&self, y2: f64) -> (u32, [f32; 4]) {
+    /// The segment g that ky^2 = `y2` falls in, its position x in node
+    /// intervals from the segment's first node i0, and its interval count.
+    fn segment(&self, y2: f64) -> Option<(usize, f64, usize, usize)> {
         let n = self.breaks.len();
         if n < 2 {
-            return (0, [1.0, 0.0, 0.0, 0.0]);
+            return None;
         }
         let g = self.breaks.partition_point(|&b| b <= y2).clamp(1, n - 1) - 1;
         let (a, b) = (self.breaks[g], self.breaks[g + 1]);
@@ -177,7 +182,19 @@ impl Row {
         } else {
             1.0 - (1.0 - t).sqrt()
         };
-        let x = u * count as f64;
+        Some((g, u * count as f64, i0, count))
+    }
+
+    /// Where ky^2 = `y2` falls: the first of four nodes and their weights,
+    /// cubic in the nodes' parameter u (ky^2 = a + (b - a)(1 - cos pi u) / 2
+    /// within a gap (a, b)), in which a square root at an anomaly is a
+    /// straight line. The four nodes stay within the gap (where the
+    /// efficiencies are smooth in u); a gap of fewer intervals is read
+    /// quadratically or linearly.
+    fn place(&self, y2: f64) -> (u32, [f32; 4]) {
+        let Some((_, x, i0, count)) = self.segment(y2) else {
+            return (0, [1.0, 0.0, 0.0, 0.0]);
+        };
         let points = (count + 1).min(4);
         let start = ((x as usize).saturating_sub(1)).min(count + 1 - points);
         let s = x - start as f64;
@@ -316,7 +333,7 @@ impl EfficiencyTable {
     pub fn memory_bytes(&self) -> usize {
         self.rows
             .iter()
-            .map(|r| r.values.len() * 4 + r.ky.len() * 8 + r.breaks.len() * 13)
+            .map(|r| (r.values.len() + r.mueller.len()) * 4 + r.ky.len() * 8 + r.breaks.len() * 13)
             .sum()
     }
 
@@ -349,6 +366,12 @@ impl EfficiencyTable {
     /// shifted place (a row nearer the edge than the query's |k_t|, or one
     /// without that anomaly) hands its weight to its neighbour.
     fn locate(&self, lambda_nm: f64, kx: f64, ky: f64) -> Lookup {
+        self.locate_with(lambda_nm, kx, ky, true)
+    }
+
+    /// `locate`, with each row read at the query's own ky where not
+    /// `shifted` (the Mueller matrices' read, see `mueller`).
+    fn locate_with(&self, lambda_nm: f64, kx: f64, ky: f64, shifted: bool) -> Lookup {
         let s = &self.spec;
         let n1 = s.cover_eta;
         let mirror = self.symmetric && kx < 0.0;
@@ -413,7 +436,7 @@ impl EfficiencyTable {
                 let shift = (kx * kx - row_kx * row_kx)
                     + 2.0 * (kx * step - row_kx * row_step) * moment1
                     + (step * step - row_step * row_step) * moment2;
-                let y2_there = y2 + shift;
+                let y2_there = if shifted { y2 + shift } else { y2 };
                 let edge_there = n1 * n1 - row_kx * row_kx;
                 out.reads[slot] = self.rows[r].place(y2_there.clamp(0.0, edge_there));
                 out.places[slot] = [row_kx, row_step, y2_there.clamp(0.0, edge_there)];
@@ -547,6 +570,102 @@ impl EfficiencyTable {
     }
 }
 
+impl EfficiencyTable {
+    /// Whether the table holds Mueller matrices (`TableSpec::polarised`).
+    pub fn is_polarised(&self) -> bool {
+        self.spec.polarised
+            && self
+                .rows
+                .iter()
+                .all(|r| r.mueller.len() == 16 * r.values.len())
+    }
+
+    /// Order m's Mueller matrix at (lambda, kx, ky) in the groove bases
+    /// (`polarisation`), its [0][0] the order's unpolarised efficiency,
+    /// read from the rows `efficiency` reads, but each at the query's own
+    /// ky: carrying the anomalies onto each row's (`locate`) moves the
+    /// read along ky^2, which suits an efficiency's kinks but smears the
+    /// smooth turn of a polarisation (measured: up to 0.15 per element on
+    /// a flat grating near grazing, against 0.03 unshifted). The
+    /// off-diagonal blocks, odd in ky, are held over ky (even, smooth at
+    /// ky = 0) and multiplied back. Between
+    /// nodes a read may leave the realisable set by a little
+    /// (`polarisation::realisable` mends it). None where the table holds
+    /// none; zeros where the order does not propagate.
+    pub fn mueller(&self, lambda_nm: f64, kx: f64, ky: f64, m: i64) -> Option<Mueller> {
+        if !self.is_polarised() {
+            return None;
+        }
+        let at = self.locate_with(lambda_nm, kx, ky, false);
+        let m = if at.mirror { -m } else { m };
+        let mut out = [0.0; 16];
+        if m < self.m_min || m > self.m_max {
+            return Some(out);
+        }
+        let k = (m - self.m_min) as usize;
+        let orders = self.orders();
+        let n1 = self.spec.cover_eta;
+        let propagates = |[kx, step, y2]: [f64; 3]| {
+            let k = kx + m as f64 * step;
+            k * k + y2 < n1 * n1
+        };
+        if !propagates(at.query) {
+            return Some(out);
+        }
+        // As `read`: rows where the order does not propagate do not count
+        // while others do.
+        let mut sum = [0.0f64; 16];
+        let mut sum_all = [0.0f64; 16];
+        let mut total = 0.0;
+        for slot in 0..4 {
+            let weight = at.weights[slot];
+            if weight == 0.0 {
+                continue;
+            }
+            let row = &self.rows[at.rows[slot] as usize];
+            let (i, w) = at.reads[slot];
+            let counts = propagates(at.places[slot]);
+            for (j, wj) in w.iter().enumerate() {
+                if *wj == 0.0 {
+                    continue;
+                }
+                let values = &row.mueller[16 * ((i as usize + j) * orders + k)..][..16];
+                let wt = weight * *wj as f64;
+                for e in 0..16 {
+                    sum_all[e] += wt * values[e] as f64;
+                    if counts {
+                        sum[e] += wt * values[e] as f64;
+                    }
+                }
+            }
+            if counts {
+                total += weight;
+            }
+        }
+        let (sum, scale) = if total > 0.0 {
+            (sum, 1.0 / total)
+        } else {
+            (sum_all, 1.0)
+        };
+        let ky_abs = at.query[2].sqrt();
+        for e in 0..16 {
+            out[e] = sum[e]
+                * scale
+                * if polarisation::odd_in_ky(e) {
+                    ky_abs
+                } else {
+                    1.0
+                };
+        }
+        // The table holds ky >= 0 (and kx >= 0 for a symmetric grating):
+        // each mirror is D M D.
+        if at.mirror != (ky < 0.0) {
+            polarisation::mirrored(&mut out);
+        }
+        Some(out)
+    }
+}
+
 /// The rows' warp of kx (see `EfficiencyTable::kx`).
 const KX_WARP: f64 = 1.2;
 
@@ -663,7 +782,12 @@ pub(super) fn build_with(
         o
     };
     rows = order.iter().map(|&r| rows[r]).collect();
-    let progress = Progress::new("rigorous grating efficiencies", rows.len());
+    let label = if spec.polarised {
+        "rigorous grating efficiencies and Mueller matrices"
+    } else {
+        "rigorous grating efficiencies"
+    };
+    let progress = Progress::new(label, rows.len());
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let next = std::sync::atomic::AtomicUsize::new(0);
     let results: Mutex<Vec<(usize, Row)>> = Mutex::new(Vec::with_capacity(rows.len()));
@@ -712,6 +836,9 @@ fn solve_row(
     let mut row = Row::layout(table.step(lambda), kx, n1, spec.nodes_per_gap);
     let orders = table.orders();
     row.values = vec![0.0f32; row.ky.len() * orders];
+    if spec.polarised {
+        row.mueller = vec![0.0f32; row.ky.len() * orders * 16];
+    }
     let prepared = prepare(
         &grating.stack(lambda, n1),
         lambda,
@@ -736,156 +863,48 @@ fn solve_row(
         for o in &d.reflected {
             if o.m >= table.m_min && o.m <= table.m_max {
                 let e = o.unpolarised();
-                row.values[iy * orders + (o.m - table.m_min) as usize] = if e.is_finite() {
+                let slot = iy * orders + (o.m - table.m_min) as usize;
+                row.values[slot] = if e.is_finite() {
                     e.clamp(0.0, 1.0)
                 } else {
                     0.0
                 } as f32;
+                if spec.polarised && e.is_finite() && e <= 1.0 + 1e-3 {
+                    let kz = (n1 * n1 - kx * kx - y * y).max(0.0).sqrt();
+                    let incident = [kx / n1, y / n1, kz / n1];
+                    let m = polarisation::order_mueller(incident, o);
+                    if m.iter().all(|v| v.is_finite()) {
+                        for (out, v) in row.mueller[16 * slot..][..16].iter_mut().zip(m) {
+                            *out = v as f32;
+                        }
+                    }
+                }
             }
         }
+    }
+    if spec.polarised {
+        hold_odd_blocks_over_ky(&mut row, orders);
     }
     Ok(row)
 }
 
-/// Where tables are kept between processes: $STAM_CACHE_DIR, else
-/// $XDG_CACHE_HOME/stam-diffraction, else ~/.cache/stam-diffraction. None
-/// when none can be found (the table is then built in every process).
-pub fn cache_dir() -> Option<PathBuf> {
-    if let Some(dir) = std::env::var_os("STAM_CACHE_DIR") {
-        return Some(PathBuf::from(dir));
-    }
-    if let Some(dir) = std::env::var_os("XDG_CACHE_HOME") {
-        return Some(PathBuf::from(dir).join("stam-diffraction"));
-    }
-    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("stam-diffraction"))
-}
-
-/// FNV-1a, for file names (the key itself is checked on reading).
-fn hash(text: &str) -> u64 {
-    text.bytes().fold(0xcbf29ce484222325, |h, b| {
-        (h ^ b as u64).wrapping_mul(0x100000001b3)
-    })
-}
-
-fn cache_path(key: &str) -> Option<PathBuf> {
-    cache_dir().map(|d| d.join(format!("rigorous-{:016x}.bin", hash(key))))
-}
-
-fn write_cache(key: &str, table: &EfficiencyTable) -> std::io::Result<()> {
-    let Some(path) = cache_path(key) else {
-        return Ok(());
-    };
-    std::fs::create_dir_all(path.parent().expect("a file in the cache directory"))?;
-    let mut bytes = Vec::new();
-    bytes.extend_from_slice(&(key.len() as u64).to_le_bytes());
-    bytes.extend_from_slice(key.as_bytes());
-    bytes.extend_from_slice(&table.m_min.to_le_bytes());
-    bytes.extend_from_slice(&table.m_max.to_le_bytes());
-    bytes.extend_from_slice(&table.period_um.to_le_bytes());
-    bytes.push(table.symmetric as u8);
-    bytes.extend_from_slice(&(table.rows.len() as u64).to_le_bytes());
-    for row in &table.rows {
-        bytes.extend_from_slice(&(row.ky.len() as u64).to_le_bytes());
-        for y in &row.ky {
-            bytes.extend_from_slice(&y.to_le_bytes());
-        }
-        for v in &row.values {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-    }
-    // Write then rename: a reader never sees half a file.
-    let partial = path.with_extension(format!("{}.partial", std::process::id()));
-    std::fs::File::create(&partial)?.write_all(&bytes)?;
-    std::fs::rename(&partial, &path)
-}
-
-/// The table stored on disk under `key`, if any (and if it is whole).
-pub fn table_from_disk(key: &str, spec: &TableSpec) -> Option<EfficiencyTable> {
-    let mut bytes = Vec::new();
-    std::fs::File::open(cache_path(key)?)
-        .ok()?
-        .read_to_end(&mut bytes)
-        .ok()?;
-    let mut at = 0usize;
-    let mut take = |n: usize| -> Option<&[u8]> {
-        let s = bytes.get(at..at + n)?;
-        at += n;
-        Some(s)
-    };
-    let key_len = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-    if take(key_len)? != key.as_bytes() {
-        return None;
-    }
-    let m_min = i64::from_le_bytes(take(8)?.try_into().ok()?);
-    let m_max = i64::from_le_bytes(take(8)?.try_into().ok()?);
-    let period_um = f64::from_le_bytes(take(8)?.try_into().ok()?);
-    let symmetric = take(1)?[0] != 0;
-    let n_rows = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-    let orders = usize::try_from(m_max - m_min + 1).ok()?;
-    let mut table = EfficiencyTable {
-        spec: spec.clone(),
-        m_min,
-        m_max,
-        period_um,
-        symmetric,
-        rows: Vec::new(),
-        build_seconds: 0.0,
-    };
-    if n_rows != spec.n_lambda * table.n_kx_rows() {
-        return None;
-    }
-    let mut rows = Vec::with_capacity(n_rows);
-    for r in 0..n_rows {
-        let n = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
-        let (il, ix) = (r / table.n_kx_rows(), r % table.n_kx_rows());
-        let mut row = Row::layout(
-            table.step(table.lambda_nm(il)),
-            table.row_kx(ix),
-            spec.cover_eta,
-            spec.nodes_per_gap,
-        );
-        let ky: Vec<f64> = take(8 * n)?
-            .chunks_exact(8)
-            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-            .collect();
-        if ky != row.ky {
-            return None;
-        }
-        row.values = take(4 * n * orders)?
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
-        rows.push(row);
-    }
-    table.rows = rows;
-    Some(table)
-}
-
-type Cache = Mutex<HashMap<String, Arc<EfficiencyTable>>>;
-
-fn memory_cache() -> &'static Cache {
-    static CACHE: OnceLock<Cache> = OnceLock::new();
-    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
-}
-
-/// The table of `grating` on `spec`: from this process's cache, else the
-/// disk cache, else built (and then stored in both).
-pub fn table(grating: &Grating, spec: &TableSpec) -> Result<Arc<EfficiencyTable>, StamError> {
-    let key = table_key(grating, spec);
-    if let Some(t) = memory_cache().lock().unwrap().get(&key) {
-        return Ok(t.clone());
-    }
-    let table = match table_from_disk(&key, spec) {
-        Some(t) => t,
-        None => {
-            let t = build(grating, spec)?;
-            if let Err(e) = write_cache(&key, &t) {
-                eprintln!("stam: could not keep the rigorous table on disk ({e}); it will be built again next time");
+/// The odd blocks of a row's Mueller matrices divided by ky (see
+/// `EfficiencyTable::mueller`); at ky = 0, the next node's quotient.
+fn hold_odd_blocks_over_ky(row: &mut Row, orders: usize) {
+    let n = row.ky.len();
+    for iy in (0..n).rev() {
+        let y = row.ky[iy];
+        for k in 0..orders {
+            for e in (0..16).filter(|&e| polarisation::odd_in_ky(e)) {
+                let at = 16 * (iy * orders + k) + e;
+                row.mueller[at] = if y > 0.0 {
+                    (row.mueller[at] as f64 / y) as f32
+                } else if iy + 1 < n {
+                    row.mueller[16 * ((iy + 1) * orders + k) + e]
+                } else {
+                    0.0
+                };
             }
-            t
         }
-    };
-    let table = Arc::new(table);
-    memory_cache().lock().unwrap().insert(key, table.clone());
-    Ok(table)
+    }
 }

@@ -336,6 +336,7 @@ fn small_spec(orders: usize) -> TableSpec {
         nodes_per_gap: 2,
         orders,
         cover_eta: 1.0,
+        polarised: false,
     }
 }
 
@@ -530,6 +531,7 @@ fn print_one_table_accuracy(grid: &[usize]) {
         nodes_per_gap: grid[2],
         orders: grid[3],
         cover_eta: 1.0,
+        polarised: false,
     };
     let g = compact_disc();
     let t = table::build(&g, &spec).unwrap();

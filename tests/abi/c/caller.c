@@ -419,6 +419,36 @@ int stam_c_caller_run(const char *params_json, char *report, size_t report_len) 
                 CHECK(78, fabsf(o[i] - pol[i]) <= 1e-3f, "polarization program %d: %g, not %g",
                       i, o[i], pol[i]);
         }
+        /* The Mueller matrix (22 floats a lane): finite, [0][0] = 1, unit
+         * basis vectors perpendicular to their directions of travel, where
+         * the material has one (every material here; rigorous gratings by
+         * their own table), and zeros and 0 for a NULL material. Lanes
+         * whose directions the core cannot take give a depolarizer. */
+        float mm[22 * N];
+        int has_m = stam_brdf_mueller(b, N, wo, wi, lambda, mm);
+        CHECK(79, has_m == 1 || (has == 0 && has_m == 0), "mueller returned %d", has_m);
+        for (int i = 0; has_m && i < N; ++i) {
+            const float *m = mm + 22 * i;
+            int finite = 1;
+            for (int k = 0; k < 22; ++k)
+                finite &= isfinite(m[k]);
+            float s_in = m[16] * m[16] + m[17] * m[17] + m[18] * m[18];
+            float s_out = m[19] * m[19] + m[20] * m[20] + m[21] * m[21];
+            CHECK(79, finite && fabsf(m[0] - 1.0f) < 1e-5f && fabsf(s_in - 1.0f) < 1e-4f &&
+                          fabsf(s_out - 1.0f) < 1e-4f,
+                  "mueller lane %d: m00 %g, |s_in|^2 %g, |s_out|^2 %g", i, m[0], s_in, s_out);
+            /* Perpendicular to -from (= -wo here) and to `to` (= wi), at
+             * lanes with unit directions above the horizon (0 and 1). */
+            if (i < 2) {
+                float d_in = m[16] * wo[3 * i] + m[17] * wo[3 * i + 1] + m[18] * wo[3 * i + 2];
+                float d_out = m[19] * wi[3 * i] + m[20] * wi[3 * i + 1] + m[21] * wi[3 * i + 2];
+                CHECK(79, fabsf(d_in) < 1e-4f && fabsf(d_out) < 1e-4f,
+                      "mueller lane %d bases not perpendicular: %g, %g", i, d_in, d_out);
+            }
+        }
+        CHECK(80, stam_brdf_mueller(NULL, N, wo, wi, lambda, mm) == 0 && mm[0] == 0.0f &&
+                      stam_brdf_mueller(b, N, NULL, wi, lambda, mm) == 0,
+              "mueller of a NULL material or direction");
         CHECK(76, stam_brdf_polarization(NULL, N, wi, wo, lambda, pol) == 0 && pol[0] == 0.0f &&
                       stam_brdf_polarization(b, N, NULL, wo, lambda, pol) == 0,
               "polarization of a NULL material or direction");

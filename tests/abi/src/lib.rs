@@ -244,6 +244,10 @@ mod tests {
             ffi::stam_brdf_polarization as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
         );
         same_signature(
+            h::stam_brdf_mueller as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
+            ffi::stam_brdf_mueller as unsafe extern "C" fn(_, _, _, _, _, _) -> _,
+        );
+        same_signature(
             h::stam_param_takes_texture as unsafe extern "C" fn(_) -> _,
             ffi::stam_param_takes_texture as unsafe extern "C" fn(_) -> _,
         );

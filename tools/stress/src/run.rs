@@ -604,6 +604,50 @@ pub fn run(options: &Options) -> Report {
         report.evaluations_abi += n as u64;
         report.evaluations_rust += n as u64;
 
+        // Mueller matrices (light from wo to wi): finite, [0][0] = 1, unit
+        // bases, realisable (the Rust API's in f64), the ABI's the Rust
+        // API's within 1e-5.
+        let mut out22 = vec![0f32; 22 * n];
+        let has_m = unsafe {
+            ffi::stam_brdf_mueller(
+                b,
+                n,
+                wo32.as_ptr(),
+                wi32.as_ptr(),
+                lam32.as_ptr(),
+                out22.as_mut_ptr(),
+            )
+        };
+        for i in 0..n {
+            let abi = &out22[22 * i..22 * i + 22];
+            let rust = brdf.mueller(wo_r[i], wi_r[i], lam_r[i]);
+            let ok = match (has_m, rust) {
+                (1, Some((m, bases))) if m.iter().all(|v| v.is_finite()) => {
+                    let flat: Vec<f64> = m
+                        .iter()
+                        .copied()
+                        .chain(bases[0].to_array())
+                        .chain(bases[1].to_array())
+                        .collect();
+                    (m[0] - 1.0).abs() < 1e-9
+                        && bases.iter().all(|b| (b.length() - 1.0).abs() < 1e-6)
+                        && stam::rigorous::polarisation::coherency_eigenvalues(&m)[0] > -1e-6
+                        && flat
+                            .iter()
+                            .zip(abi)
+                            .all(|(x, y)| (x - *y as f64).abs() <= 1e-5)
+                }
+                // Directions the core cannot take: the ABI's depolarizer.
+                (1, _) => abi[0] == 1.0 && abi[1..16].iter().all(|&x| x == 0.0),
+                (_, _) => abi.iter().all(|&x| x == 0.0),
+            };
+            if !ok {
+                report.bad_polarization += 1;
+                let w = ctx("mueller", i)();
+                report.fail(format!("{w}: ABI {abi:?} ({has_m})"));
+            }
+        }
+
         // Sampling through the ABI, spectral and RGB mode, with the pdf at
         // the returned direction, and through the Rust API at the unrounded
         // f64 inputs.

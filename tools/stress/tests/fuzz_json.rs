@@ -191,6 +191,28 @@ fn call_everything(p: *mut stam::ffi::StamBrdf, floats: &[f32]) -> Result<(), St
                 return Err(format!("polarization gave {v:?} (returned {has})"));
             }
         }
+        // Mueller matrices: finite, [0][0] = 1 where the material has them,
+        // zeros where it has none.
+        let mut mm = vec![0f32; 22 * n];
+        let has_m = stam_brdf_mueller(
+            p,
+            n,
+            wo.as_ptr(),
+            wi.as_ptr(),
+            lam.as_ptr(),
+            mm.as_mut_ptr(),
+        );
+        for m in mm.chunks_exact(22) {
+            let fine = m.iter().all(|x| x.is_finite())
+                && if has_m == 1 {
+                    (m[0] - 1.0).abs() < 1e-5
+                } else {
+                    m.iter().all(|&x| x == 0.0)
+                };
+            if !fine {
+                return Err(format!("mueller gave {m:?} (returned {has_m})"));
+            }
+        }
         if (stam_brdf_export_polarization_program(p, std::ptr::null_mut(), 0) > 0) != (has == 1) {
             return Err(format!(
                 "a polarization program where polarization returned {has}"

@@ -62,6 +62,8 @@ mod rgb;
 pub mod rigorous;
 mod rigorous_grid;
 #[cfg(test)]
+mod rigorous_polarisation_tests;
+#[cfg(test)]
 mod rigorous_tests;
 mod sampling;
 mod smoothed_weight;
@@ -144,6 +146,50 @@ impl Periodic {
     /// The rigorous orders of `"orders": "rigorous"` (None: Stam's formula).
     pub fn rigorous(&self) -> Option<&rigorous::RigorousOrders> {
         self.rigorous.as_ref()
+    }
+
+    /// A rigorous grating's Mueller matrix for light arriving from `from`
+    /// and leaving along `to` at `lambda_nm`, over its [0][0]: the orders'
+    /// matrices (`RigorousOrders::order_mueller`) weighted as f weights
+    /// them (each order's Gaussian), with the Stokes basis vectors of the
+    /// two directions of travel (-from, to) it is given in. None for
+    /// Stam's formula or a grating with a cover; an ideal depolarizer
+    /// where no order reaches the pair (f is 0 there).
+    pub fn rigorous_mueller(
+        &self,
+        from: glam::DVec3,
+        to: glam::DVec3,
+        lambda_nm: f64,
+    ) -> Option<(crate::rigorous::polarisation::Mueller, [glam::DVec3; 2])> {
+        use crate::rigorous::polarisation::groove_basis;
+        use glam::DVec3;
+        let r = self.rigorous.as_ref().filter(|r| r.polarizes())?;
+        let basis = |d: DVec3| DVec3::from_array(groove_basis(d.normalize_or_zero().to_array()));
+        let bases = [basis(-from), basis(to)];
+        let mut sum = [0.0f64; 16];
+        let mut missing = false;
+        if let Some(geom) = PairGeometry::new(from, to) {
+            let k = spectrum::wavenumber_per_um(lambda_nm);
+            self.surface.for_each_order(k, &geom, |n, g| {
+                match r.order_mueller(n, lambda_nm, geom.wi, geom.wo) {
+                    Some(m) => sum.iter_mut().zip(m).for_each(|(s, v)| *s += g * v),
+                    None => missing = true,
+                }
+            });
+        }
+        if missing {
+            return None;
+        }
+        let mut out = [0.0; 16];
+        if sum[0] > 0.0 && sum.iter().all(|v| v.is_finite()) {
+            for (o, v) in out.iter_mut().zip(sum) {
+                *o = v / sum[0];
+            }
+            out = crate::rigorous::polarisation::realisable(&out);
+        } else {
+            out[0] = 1.0;
+        }
+        Some((out, bases))
     }
 
     /// What a rigorous grating's cover reflects as a mirror at an incidence
@@ -236,6 +282,19 @@ impl SurfaceModel for Periodic {
             self.surface
                 .kernel_given(spectrum::wavenumber_per_um(lambda_nm), geom, &eta),
         )
+    }
+
+    fn has_unfactored_mueller(&self) -> bool {
+        self.rigorous.as_ref().is_some_and(|r| r.polarizes())
+    }
+
+    fn unfactored_mueller(
+        &self,
+        from: glam::DVec3,
+        to: glam::DVec3,
+        lambda_nm: f64,
+    ) -> Option<([f64; 16], [glam::DVec3; 2])> {
+        self.rigorous_mueller(from, to, lambda_nm)
     }
 
     fn unfactored_rgb(&self, geom: &PairGeometry) -> Option<[f64; 3]> {
@@ -685,19 +744,26 @@ impl PeriodicSurface {
     /// sum over the orders near the pair of power(n) exp(-E_n(k)) (see
     /// `order_sum`); 0 for k <= 0 or a non-finite geometry.
     fn gaussian_sum(&self, k_per_um: f64, geom: &PairGeometry, power: impl Fn(i64) -> f64) -> f64 {
+        let mut sum = 0.0;
+        self.for_each_order(k_per_um, geom, |n, g| sum += power(n) * g);
+        sum
+    }
+
+    /// Each order n near the pair with its Gaussian exp(-E_n(k)), the terms
+    /// of `gaussian_sum`; none for k <= 0 or a non-finite geometry.
+    pub fn for_each_order(&self, k_per_um: f64, geom: &PairGeometry, visit: impl FnMut(i64, f64)) {
         let (u, v, w) = (geom.u, geom.v, geom.w);
         if !(k_per_um > 0.0 && k_per_um.is_finite() && w < 0.0 && u.is_finite() && v.is_finite()) {
-            return 0.0;
+            return;
         }
         let e_v = (self.coherence_um * k_per_um * v).powi(2);
         if !(e_v < EXP_UNDERFLOW) {
-            return 0.0;
+            return;
         }
         let (lo, hi) = self.orders_near(k_per_um, u);
-        if lo > hi {
-            return 0.0;
+        if lo <= hi {
+            self.order_terms(k_per_um, u, v, lo..=hi, visit);
         }
-        self.order_sum(k_per_um, u, v, lo..=hi, power)
     }
 
     /// Table power for the kernels: orders filtered out of the table count
@@ -760,18 +826,31 @@ impl PeriodicSurface {
         orders: impl Iterator<Item = i64>,
         power: impl Fn(i64) -> f64,
     ) -> f64 {
+        let mut sum = 0.0;
+        self.order_terms(k, u, v, orders, |n, g| sum += power(n) * g);
+        sum
+    }
+
+    /// `order_sum`'s terms: each order with its exp(-E_n(k)) above underflow.
+    #[inline]
+    fn order_terms(
+        &self,
+        k: f64,
+        u: f64,
+        v: f64,
+        orders: impl Iterator<Item = i64>,
+        mut visit: impl FnMut(i64, f64),
+    ) {
         let l = self.coherence_um;
         let g = 2.0 * PI / self.period_um;
         let e_v = (l * k * v).powi(2);
-        let mut sum = 0.0;
         for n in orders {
             let d = l * (k * u - g * n as f64);
             let e = d * d + e_v;
             if e < EXP_UNDERFLOW {
-                sum += power(n) * fast_exp(-e);
+                visit(n, fast_exp(-e));
             }
         }
-        sum
     }
 }
 

@@ -51,7 +51,7 @@ use super::rigorous_grid::PairGrid;
 use super::{PeriodicSurface, Profile};
 use crate::error::StamError;
 use crate::optics::fresnel::{conductor_reflectance, Fresnel};
-use crate::rigorous::{table, EfficiencyTable, Grating, Medium, TableSpec};
+use crate::rigorous::{polarisation, table, EfficiencyTable, Grating, Medium, TableSpec};
 use crate::spectrum::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 
 /// Staircase layers for smooth (sine and tabulated) profiles.
@@ -71,6 +71,10 @@ pub struct RigorousOrders {
     /// What is derived from the table on first use and shared by its
     /// materials (`derived_cell`).
     derived: Arc<Derived>,
+    /// What the table was built from: the polarised table is built from
+    /// the same on first use.
+    grating: Grating,
+    spec: TableSpec,
 }
 
 /// Resamplings of a table, each built on first use.
@@ -80,6 +84,9 @@ struct Derived {
     mirror: OnceLock<MirrorSpectra>,
     /// Every order's pair efficiencies for the programs.
     pairs: OnceLock<Option<Arc<PairGrid>>>,
+    /// The table with each order's Mueller matrix (polarised renders),
+    /// or why there is none.
+    polarised: OnceLock<Result<Arc<EfficiencyTable>, String>>,
 }
 
 /// Nodes per axis of `MirrorSpectra`'s grid, over (|kx|, |ky|) in
@@ -131,6 +138,7 @@ pub fn table_spec(fourier_orders: usize, cover_eta: f64) -> TableSpec {
         nodes_per_gap: 3,
         orders: fourier_orders,
         cover_eta,
+        polarised: false,
     }
 }
 
@@ -151,13 +159,78 @@ impl RigorousOrders {
             metal: medium(fresnel).map_err(StamError::new)?,
             slices: SLICES,
         };
-        let table = table::table(&grating, &table_spec(fourier_orders, cover_eta))?;
+        let spec = table_spec(fourier_orders, cover_eta);
+        let table = table::table(&grating, &spec)?;
         Ok(RigorousOrders {
             derived: derived_cell(&table),
             table,
             period_um,
             cover_eta,
+            grating,
+            spec,
         })
+    }
+
+    /// Whether the orders have a polarisation to export: every grating
+    /// without a cover (a cover's two interfaces are taken unpolarised, see
+    /// the module doc, so its orders' polarisation would be half a model).
+    pub fn polarizes(&self) -> bool {
+        !self.has_cover()
+    }
+
+    /// The table with Mueller matrices: built on first use (a second solve
+    /// of every node, with progress on stderr, then kept on disk like the
+    /// efficiencies), shared by the materials of the grating.
+    fn polarised_table(&self) -> Option<&EfficiencyTable> {
+        if !self.polarizes() {
+            return None;
+        }
+        let built = self.derived.polarised.get_or_init(|| {
+            let spec = TableSpec {
+                polarised: true,
+                ..self.spec.clone()
+            };
+            table::table(&self.grating, &spec).map_err(|e| e.to_string())
+        });
+        match built {
+            Ok(t) => Some(t),
+            Err(e) => {
+                static WARNED: OnceLock<()> = OnceLock::new();
+                WARNED.get_or_init(|| {
+                    eprintln!("stam: no polarised rigorous table ({e}): the orders depolarize")
+                });
+                None
+            }
+        }
+    }
+
+    /// Stam's order n's Mueller matrix (the solver's order -n) for light
+    /// arriving from `from` and leaving along `to` (unit, above the
+    /// horizon, the material's frame), at the incidence of the exact order
+    /// pair nearest to them, in the groove bases of the two directions of
+    /// travel (`rigorous::polarisation`; in the material's frame the groove
+    /// basis of a direction d is y x d normalised, up to a sign that does not
+    /// change a Mueller matrix). [0][0] is the order's unpolarised
+    /// efficiency. None without a polarised table.
+    pub fn order_mueller(
+        &self,
+        n: i64,
+        lambda_nm: f64,
+        from: DVec3,
+        to: DVec3,
+    ) -> Option<polarisation::Mueller> {
+        let table = self.polarised_table()?;
+        // The solver's frame is the material's turned half a turn about x
+        // (z into the grating): the incident wave's tangential wavevector
+        // is (-from.x, from.y), the outgoing one's (to.x, -to.y). The
+        // exact pair of order m = -n moves both by half their distance
+        // from kx_out = kx_in + m lambda / Lam, ky_out = ky_in.
+        let m = -n;
+        let step = lambda_nm * 1e-3 / self.period_um;
+        let kx = 0.5 * (to.x - from.x - m as f64 * step);
+        let ky = 0.5 * (from.y - to.y);
+        let (kx, ky) = within_disc(kx, ky);
+        table.mueller(lambda_nm, kx, ky, m)
     }
 
     /// The cover's reflectance at an incidence cosine (0 without a cover):
