@@ -289,8 +289,9 @@ on the side the normal points to and is black from behind; wrap it in
 result is a Mueller matrix: the unpolarized value times the Fresnel
 reflection's polarization at the pair's half vector (from the core: natively
 in scalar variants, its program in JIT ones), in Mitsuba's Stokes bases, as
-roughconductor's (docs/polarisation.md); rigorous gratings still depolarize
-(the unpolarized value times a depolarizer). RGB variants receive the core's
+roughconductor's (docs/polarisation.md); rigorous gratings give each
+order's matrix from the solver's amplitudes in scalar variants and still
+depolarize in JIT ones. RGB variants receive the core's
 D65-weighted linear sRGB integral; colours purer than the sRGB primaries (the nearly
 monochromatic orders of gratings) are desaturated into the gamut at
 constant luminance, so RGB renders of gratings are paler than spectral ones.
@@ -655,8 +656,9 @@ private:
     /// the conventions of Mitsuba's mueller::specular_reflection; scalar
     /// variants: stam_brdf_polarization, JIT ones: its program), its Stokes
     /// bases rotated into the implicit ones of the directions the light
-    /// travels along, as Mitsuba's roughconductor does. Materials without a
-    /// polarisation (rigorous gratings) depolarize.
+    /// travels along, as Mitsuba's roughconductor does. Rigorous gratings:
+    /// the core's matrix of their orders in scalar variants
+    /// (rigorous_mueller); JIT variants depolarize them.
     Spectrum as_spectrum(const BSDFContext &ctx, const SurfaceInteraction3f &si,
                          const Vector3f &wo, const UnpolarizedSpectrum &value) const {
         if constexpr (!is_polarized_v<Spectrum>) {
@@ -686,7 +688,7 @@ private:
                     lambda[j] = si.wavelengths[j];
                 }
                 if (!stam_brdf_polarization(m_core.get(), NW, wi3, wo3, lambda, out))
-                    return depolarizer<Spectrum>(value);
+                    return rigorous_mueller(ctx, si, wo, value);
                 for (size_t j = 0; j < NW; ++j)
                     for (size_t c = 0; c < 3; ++c)
                         pol[c][j] = out[3 * j + c];
@@ -709,6 +711,49 @@ private:
             Mask planar = dr::squared_norm(s_in) > 0.f && dr::squared_norm(s_out) > 0.f;
             s_in = dr::select(planar, dr::normalize(s_in), Vector3f(1.f, 0.f, 0.f));
             s_out = dr::select(planar, dr::normalize(s_out), Vector3f(1.f, 0.f, 0.f));
+            return mueller::rotate_mueller_basis(m, -towards, s_in, mueller::stokes_basis(-towards),
+                                                 away, s_out, mueller::stokes_basis(away));
+        }
+    }
+
+    /// Scalar polarized variants, a material whose matrix is its own
+    /// (rigorous gratings): the core's Mueller matrix (stam_brdf_mueller,
+    /// each order's from the solver's amplitudes) for the light's path,
+    /// times the value, its bases (the core's, in the core's frame) rotated
+    /// into Mitsuba's. Depolarizes where the core has none (a cover).
+    Spectrum rigorous_mueller(const BSDFContext &ctx, const SurfaceInteraction3f &si,
+                              const Vector3f &wo, const UnpolarizedSpectrum &value) const {
+        if constexpr (!is_polarized_v<Spectrum> || dr::is_jit_v<Float>) {
+            DRJIT_MARK_USED(ctx);
+            DRJIT_MARK_USED(si);
+            DRJIT_MARK_USED(wo);
+            return depolarizer<Spectrum>(value);
+        } else {
+            constexpr size_t NW = dr::size_v<UnpolarizedSpectrum>;
+            // The light arrives along -towards and leaves along away.
+            bool radiance = ctx.mode == TransportMode::Radiance;
+            Vector3f towards = radiance ? wo : si.wi, away = radiance ? si.wi : wo;
+            auto [c, s] = frame_rotation(si, Mask(true));
+            Vector3f from_c = to_core(towards, c, s), to_c = to_core(away, c, s);
+            float from3[3 * NW], to3[3 * NW], lambda[NW], out[22 * NW];
+            for (size_t j = 0; j < NW; ++j) {
+                for (size_t d = 0; d < 3; ++d) {
+                    from3[3 * j + d] = from_c[d];
+                    to3[3 * j + d] = to_c[d];
+                }
+                lambda[j] = si.wavelengths[j];
+            }
+            if (!m_core || !stam_brdf_mueller(m_core.get(), NW, from3, to3, lambda, out))
+                return depolarizer<Spectrum>(value);
+            Spectrum m;
+            for (size_t r = 0; r < 4; ++r)
+                for (size_t k = 0; k < 4; ++k)
+                    for (size_t j = 0; j < NW; ++j)
+                        m(r, k)[j] = value[j] * out[22 * j + 4 * r + k];
+            // One pair of bases for all wavelengths (they depend on the
+            // directions alone)
+            Vector3f s_in = from_core(Vector3f(out[16], out[17], out[18]), c, s),
+                     s_out = from_core(Vector3f(out[19], out[20], out[21]), c, s);
             return mueller::rotate_mueller_basis(m, -towards, s_in, mueller::stokes_basis(-towards),
                                                  away, s_out, mueller::stokes_basis(away));
         }
