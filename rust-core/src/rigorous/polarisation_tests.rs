@@ -4,16 +4,13 @@
 
 use faer::c64;
 
-use super::layers::{Grating, Medium};
+use super::layers::Grating;
 use super::polarisation::{coherency_eigenvalues, mueller_of_jones, order_mueller, Mueller};
 use super::table::{self, TableSpec};
+use super::tests::aluminium;
 use super::{solve, Incidence};
-use crate::optics::fresnel::{conductor_polarization, metal_by_name};
+use crate::optics::fresnel::conductor_polarization;
 use crate::optics::profile::Profile;
-
-fn aluminium() -> Medium {
-    Medium::Metal(metal_by_name("aluminium").unwrap())
-}
 
 /// A pseudo-random number in [0, 1) (xorshift), for reproducible cases.
 fn uniform(state: &mut u64) -> f64 {
@@ -82,16 +79,11 @@ fn coherency_eigenvalues_tell_realisable_matrices() {
     assert!(coherency_eigenvalues(&too_much)[0] < -0.01);
 }
 
+/// The rigorous tests' small table grid, polarised.
 fn spec(orders: usize) -> TableSpec {
     TableSpec {
-        lambda_min_nm: 450.0,
-        lambda_max_nm: 650.0,
-        n_lambda: 3,
-        n_kx: 9,
-        nodes_per_gap: 2,
-        orders,
-        cover_eta: 1.0,
         polarised: true,
+        ..super::tests::small_spec(orders)
     }
 }
 
@@ -134,15 +126,7 @@ fn check_nodes_and_mirrors(grating: &Grating, nodes: &[(usize, usize, f64)]) -> 
 fn the_polarised_table_is_the_solver_at_its_nodes_under_both_mirrors() {
     // The compact disc (symmetric: rows for kx >= 0 alone) and an
     // asymmetric tabulated profile (rows for both signs of kx).
-    let disc = Grating {
-        period_um: 2.5,
-        profile: Profile::Rect {
-            height_um: 0.15,
-            width_um: 0.5,
-        },
-        metal: aluminium(),
-        slices: 1,
-    };
+    let disc = super::tests::compact_disc();
     let worst = check_nodes_and_mirrors(&disc, &[(0, 1, 0.2), (1, 2, 0.5), (2, 3, 0.8)]);
     println!("compact disc: worst element {worst:.2e}");
     assert!(worst < 2e-6, "compact disc: {worst}");

@@ -503,6 +503,23 @@ impl EfficiencyTable {
 
     /// Order k = m - m_min at a located query.
     fn read(&self, at: &Lookup, k: usize) -> f64 {
+        // Cubic weights can overshoot a sharp peak a little.
+        self.read_channels::<1>(at, k, |row| &row.values)
+            .map_or(0.0, |[v]| v.clamp(0.0, 1.0))
+    }
+
+    /// The C channels of order k = m - m_min at a located query (a node of
+    /// a row holds them at `values(row)[C (node orders + k)..]`): the rows'
+    /// weighted reads, where rows read where the order does not propagate
+    /// (its anomaly moved past the query's place there) do not count while
+    /// others do. None where the order does not propagate at the query (it
+    /// carries nothing).
+    fn read_channels<const C: usize>(
+        &self,
+        at: &Lookup,
+        k: usize,
+        values: impl Fn(&Row) -> &[f32],
+    ) -> Option<[f64; C]> {
         let orders = self.orders();
         let n1 = self.spec.cover_eta;
         let m = self.m_min + k as i64;
@@ -510,38 +527,40 @@ impl EfficiencyTable {
             let k = kx + m as f64 * step;
             k * k + y2 < n1 * n1
         };
-        // An order that does not propagate carries nothing.
         if !propagates(at.query) {
-            return 0.0;
+            return None;
         }
-        // Rows read where the order does not propagate (its anomaly moved
-        // past the query's place there) do not count while others do.
-        let mut sum = 0.0;
-        let mut total = 0.0;
-        let mut sum_all = 0.0;
+        let (mut sum, mut sum_all, mut total) = ([0.0f64; C], [0.0f64; C], 0.0);
         for slot in 0..4 {
             let weight = at.weights[slot];
             if weight == 0.0 {
                 continue;
             }
-            let row = &self.rows[at.rows[slot] as usize];
+            let data = values(&self.rows[at.rows[slot] as usize]);
             let (i, w) = at.reads[slot];
-            let i = i as usize;
-            let mut v = 0.0f32;
+            let counts = propagates(at.places[slot]);
             for (j, wj) in w.iter().enumerate() {
-                if *wj != 0.0 {
-                    v += wj * row.values[(i + j) * orders + k];
+                if *wj == 0.0 {
+                    continue;
+                }
+                let node = &data[C * ((i as usize + j) * orders + k)..][..C];
+                let wt = weight * *wj as f64;
+                for ((s, a), v) in sum.iter_mut().zip(sum_all.iter_mut()).zip(node) {
+                    *a += wt * *v as f64;
+                    if counts {
+                        *s += wt * *v as f64;
+                    }
                 }
             }
-            sum_all += weight * v as f64;
-            if propagates(at.places[slot]) {
-                sum += weight * v as f64;
+            if counts {
                 total += weight;
             }
         }
-        let sum = if total > 0.0 { sum / total } else { sum_all };
-        // Cubic weights can overshoot a sharp peak a little.
-        sum.clamp(0.0, 1.0)
+        Some(if total > 0.0 {
+            sum.map(|v| v / total)
+        } else {
+            sum_all
+        })
     }
 
     /// Efficiency of order m at (lambda, kx, ky), (kx, ky) the incident
@@ -602,60 +621,19 @@ impl EfficiencyTable {
         if m < self.m_min || m > self.m_max {
             return Some(out);
         }
-        let k = (m - self.m_min) as usize;
-        let orders = self.orders();
-        let n1 = self.spec.cover_eta;
-        let propagates = |[kx, step, y2]: [f64; 3]| {
-            let k = kx + m as f64 * step;
-            k * k + y2 < n1 * n1
-        };
-        if !propagates(at.query) {
+        let Some(sum) =
+            self.read_channels::<16>(&at, (m - self.m_min) as usize, |row| &row.mueller)
+        else {
             return Some(out);
-        }
-        // As `read`: rows where the order does not propagate do not count
-        // while others do.
-        let mut sum = [0.0f64; 16];
-        let mut sum_all = [0.0f64; 16];
-        let mut total = 0.0;
-        for slot in 0..4 {
-            let weight = at.weights[slot];
-            if weight == 0.0 {
-                continue;
-            }
-            let row = &self.rows[at.rows[slot] as usize];
-            let (i, w) = at.reads[slot];
-            let counts = propagates(at.places[slot]);
-            for (j, wj) in w.iter().enumerate() {
-                if *wj == 0.0 {
-                    continue;
-                }
-                let values = &row.mueller[16 * ((i as usize + j) * orders + k)..][..16];
-                let wt = weight * *wj as f64;
-                for e in 0..16 {
-                    sum_all[e] += wt * values[e] as f64;
-                    if counts {
-                        sum[e] += wt * values[e] as f64;
-                    }
-                }
-            }
-            if counts {
-                total += weight;
-            }
-        }
-        let (sum, scale) = if total > 0.0 {
-            (sum, 1.0 / total)
-        } else {
-            (sum_all, 1.0)
         };
+        // The odd blocks are held over ky.
         let ky_abs = at.query[2].sqrt();
-        for e in 0..16 {
-            out[e] = sum[e]
-                * scale
-                * if polarisation::odd_in_ky(e) {
-                    ky_abs
-                } else {
-                    1.0
-                };
+        for (e, (o, v)) in out.iter_mut().zip(sum).enumerate() {
+            *o = if polarisation::odd_in_ky(e) {
+                v * ky_abs
+            } else {
+                v
+            };
         }
         // The table holds ky >= 0 (and kx >= 0 for a symmetric grating):
         // each mirror is D M D.

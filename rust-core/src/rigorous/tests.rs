@@ -8,7 +8,7 @@ fn deg(d: f64) -> f64 {
     d.to_radians()
 }
 
-fn aluminium() -> Medium {
+pub(super) fn aluminium() -> Medium {
     Medium::Metal(metal_by_name("aluminium").unwrap())
 }
 
@@ -84,7 +84,7 @@ fn a_lossless_grating_conserves_energy() {
     }
 }
 
-fn compact_disc() -> Grating {
+pub(super) fn compact_disc() -> Grating {
     Grating {
         period_um: 2.5,
         profile: Profile::Rect {
@@ -327,7 +327,7 @@ fn print_solve_time() {
     }
 }
 
-fn small_spec(orders: usize) -> TableSpec {
+pub(super) fn small_spec(orders: usize) -> TableSpec {
     TableSpec {
         lambda_min_nm: 450.0,
         lambda_max_nm: 650.0,
