@@ -172,19 +172,8 @@ fn kron(sigma: &[[[c64; 2]; 2]; 4], a: usize, b: usize, r: usize, c: usize) -> c
 /// conj(sigma_j): Hermitian, with trace M[0][0]; positive semi-definite
 /// exactly when M is physically realisable (a mixture of Jones matrices).
 fn coherency(m: &Mueller) -> faer::Mat<c64> {
-    let sigma = paulis();
-    faer::Mat::from_fn(4, 4, |r, c| {
-        let mut v = c64::new(0.0, 0.0);
-        for a in 0..4 {
-            for b in 0..4 {
-                let w = m[4 * a + b];
-                if w != 0.0 {
-                    v += kron(&sigma, a, b, r, c) * (0.25 * w);
-                }
-            }
-        }
-        v
-    })
+    let h = coherency_array(m);
+    faer::Mat::from_fn(4, 4, |r, c| h[r][c])
 }
 
 /// The eigenvalues of the Cloude coherency matrix of `m` over m[0][0],
@@ -201,8 +190,8 @@ pub fn coherency_eigenvalues(m: &Mueller) -> [f64; 4] {
     out
 }
 
-/// The coherency matrix as an array, from each Pauli matrix's two
-/// non-zero entries (64 products instead of `coherency`'s 4,096).
+/// The coherency matrix (`coherency`) as an array, from each Pauli
+/// matrix's two non-zero entries.
 fn coherency_array(m: &Mueller) -> [[c64; 4]; 4] {
     let sigma = paulis();
     let mut h = [[c64::new(0.0, 0.0); 4]; 4];
